@@ -1,0 +1,7 @@
+"""penny_env: an exact event-driven simulator of the bouncing penny and Gymnasium environments on it."""
+from .physics import (PennyParams, SolverSettings, Table, Ellipse, Circle, Stadium, ConvexTable,
+                      simulate, impact_map, Trajectory)
+
+__version__ = "0.1.0"
+__all__ = ["PennyParams", "SolverSettings", "Table", "Ellipse", "Circle", "Stadium", "ConvexTable",
+           "simulate", "impact_map", "Trajectory"]

@@ -1,0 +1,179 @@
+"""Public single-trajectory API: simulate() and impact_map()."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .advance import advance, relocate_inside
+from .flow import PHI_DOT, THETA_DOT, flow, end_kinematics, kinetic_energy
+from .laws import apply_law, make_law
+from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
+from .validation import (as_state, check_controls, check_inside, check_params, check_table,
+                         positive_count, positive_time)
+
+
+@dataclass
+class Trajectory:
+    """Result of :func:`simulate`.
+
+    impact_times (k,), impact_ends (k,) (+1 front, -1 back), impact_states (k, 6) (the state
+    right after each impact), final_state (6,), final_time. rest_times: times at which an
+    accumulation of impacts (Zeno) brought the penny to rest. complete: False when n_impacts
+    were asked for but the penny provably never hits the wall again (uncontrolled periodic
+    motion away from the wall, or at rest). states_at(times) evaluates the trajectory exactly.
+    """
+
+    impact_times: np.ndarray
+    impact_ends: np.ndarray
+    impact_states: np.ndarray
+    final_state: np.ndarray
+    final_time: float
+    rest_times: np.ndarray
+    complete: bool
+    params: PennyParams
+    # piecewise description for dense output: start time, start state, accelerations
+    _seg_t: np.ndarray = field(repr=False, default=None)
+    _seg_s: np.ndarray = field(repr=False, default=None)
+    _seg_acc: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def n_impacts(self) -> int:
+        return int(self.impact_times.shape[0])
+
+    def states_at(self, times) -> np.ndarray:
+        """(len(times), 6) states at the given times in [0, final_time]."""
+        t = np.atleast_1d(np.asarray(times, dtype=float))
+        if np.any(~np.isfinite(t)) or np.any(t < 0) or np.any(t > self.final_time * (1 + 1e-12) + 1e-300):
+            raise ValueError(f"times must lie in [0, final_time={self.final_time}]")
+        k = np.searchsorted(self._seg_t, t, side="right") - 1
+        k = np.clip(k, 0, len(self._seg_t) - 1)
+        out = flow(self._seg_s[k].T, self._seg_acc[k, 0], self._seg_acc[k, 1], t - self._seg_t[k], self.params.R)
+        return out.T
+
+    def energies(self) -> np.ndarray:
+        """Kinetic energy right after each impact."""
+        return kinetic_energy(self.impact_states.T, self.params)
+
+
+def _periodic_no_hit_chunk(s, acc1, acc2):
+    """For uncontrolled motion: one period (2 pi / |phi_dot|) or None when motion is a line."""
+    if acc1 != 0 or acc2 != 0:
+        return None
+    w = abs(s[PHI_DOT])
+    return 2 * math.pi / w if w > 0 else None
+
+
+def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impacts=None,
+             controls=None, control_dt=None, settings: SolverSettings | None = None) -> Trajectory:
+    """Simulate the (controlled) bouncing penny exactly, impact by impact.
+
+    state: (x, y, theta, phi, theta_dot, phi_dot). table: Ellipse/Circle/Stadium/ConvexTable or
+    None (open plane). law: "elastic", "plastic" or a restitution coefficient e in [0, 1].
+    Stops at t_final, or right after the n_impacts-th impact, whichever comes first (at least
+    one must be given; with controls, t_final defaults to len(controls) * control_dt).
+    controls: (K, 2) rows of torques (u1, u2), row k held on [k, k+1) * control_dt.
+    """
+    params = check_params(params)
+    table = check_table(table, params)
+    law = make_law(law)
+    settings = DEFAULT_SETTINGS if settings is None else settings
+    s = as_state(state)
+    u, cdt = check_controls(controls, control_dt)
+    if t_final is not None:
+        t_final = positive_time(t_final, "t_final")
+    if n_impacts is not None:
+        n_impacts = positive_count(n_impacts, "n_impacts")
+        if table is None:
+            raise ValueError("n_impacts needs a table: the open plane has no impacts")
+    if u is not None:
+        horizon = u.shape[0] * cdt
+        if t_final is None:
+            t_final = horizon
+        elif t_final > horizon * (1 + 1e-12):
+            raise ValueError(f"t_final={t_final} is beyond the controls' horizon {horizon} (len(controls) * control_dt)")
+    if t_final is None and n_impacts is None:
+        raise ValueError("give t_final or n_impacts (or controls)")
+    S = s[:, None]
+    check_inside(S, params, table)
+    if table is not None:
+        S = relocate_inside(S, params, table)
+
+    times, ends, states, rests = [], [], [], []
+    seg_t, seg_s, seg_acc = [0.0], [S[:, 0].copy()], []
+    t = 0.0
+    complete = True
+    k = 0
+    while True:
+        if u is not None:
+            acc1, acc2 = u[k, 0] / params.J, u[k, 1] / params.rolling_inertia
+            chunk = min(cdt * (k + 1), t_final) - t
+        else:
+            acc1 = acc2 = 0.0
+            period = _periodic_no_hit_chunk(S[:, 0], acc1, acc2)
+            chunk = period if period is not None else 1.0
+            if t_final is not None:
+                chunk = min(chunk, t_final - t)
+        seg_acc.append((acc1, acc2))
+        left = None if n_impacts is None else n_impacts - len(times)
+        S, log, elapsed = advance(S, acc1, acc2, chunk, params, table, law, settings, stop_after=left)
+        for i in range(log.time.shape[0]):
+            times.append(t + log.time[i])
+            ends.append(int(log.end[i]))
+            states.append(log.state[i])
+            seg_t.append(t + log.time[i])
+            seg_s.append(log.state[i].copy())
+            seg_acc.append((acc1, acc2))
+        for tr, pinned in zip(log.rest_time, log.rest_pinned):
+            rests.append(t + tr)
+            if pinned:  # held against the wall until the interval ends
+                seg_acc[-1] = (0.0, 0.0)
+        t += float(elapsed[0])
+        if n_impacts is not None and len(times) >= n_impacts:
+            t = times[-1]
+            break
+        if t_final is not None and t >= t_final * (1 - 1e-15):
+            t = t_final
+            break
+        if u is None and log.time.shape[0] == 0 and table is not None:
+            moving = S[THETA_DOT, 0] != 0 or S[PHI_DOT, 0] != 0
+            if not moving or _periodic_no_hit_chunk(S[:, 0], acc1, acc2) is not None:
+                # periodic motion with a full period free of impacts (or rest): none ever again
+                complete = False
+                if t_final is None:
+                    break
+                S = flow(S, 0.0, 0.0, t_final - t, params.R)
+                t = t_final
+                break
+        if u is not None and t >= cdt * (k + 1) * (1 - 1e-15):
+            k += 1
+            seg_t.append(t)
+            seg_s.append(S[:, 0].copy())
+    final = S[:, 0].copy()
+    return Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
+                      final, float(t), np.array(rests), complete, params,
+                      np.array(seg_t), np.array(seg_s).reshape(-1, 6), np.array(seg_acc))
+
+
+def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
+    """Post-impact state for a state whose given end (+1 front, -1 back) lies on the wall.
+
+    The law's formula is applied as a map on the impact surface whatever the sign of the
+    normal velocity (the simulator only calls it for ends moving outward). For the plastic law
+    an end left moving outward (I > m R^2) gets its normal velocity removed."""
+    params = check_params(params)
+    if table is None:
+        raise ValueError("table is required for impact_map")
+    table = check_table(table, params)
+    law = make_law(law)
+    s = as_state(state)
+    if isinstance(end, bool) or end not in (1, -1):
+        raise ValueError(f"end must be +1 (front) or -1 (back), got {end!r}")
+    S = s[:, None]
+    px, py, _, _ = end_kinematics(S, float(end), params.R)
+    g = float(table.h(px, py)[0])
+    if abs(g) > 1e-8 * table.size:
+        label = "front" if end == 1 else "back"
+        raise ValueError(f"state: the {label} end is not on the wall (h = {g:.3g})")
+    return apply_law(S, float(end), params, table, law)[:, 0]
