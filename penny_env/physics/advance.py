@@ -117,17 +117,15 @@ def advance(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
         j = act[hit]
         th = t_hit[hit]
         pre = relocate_inside(flow(s[:, j], acc1[j], acc2[j], th, params.R), params, table)
+        hit_end = end[hit]
         # a grazing touch whose normal velocity has turned inward by the impact time is no impact
-        touch = wall_value(pre, end[hit].astype(float), params, table)[1] <= 0.0
+        touch = wall_value(pre, hit_end.astype(float), params, table)[1] <= 0.0
         if touch.any():
             i = j[touch]
             s[:, i] = pre[:, touch]
             elapsed[i] += th[touch]
             keep = ~touch
-            j, th, pre = j[keep], th[keep], pre[:, keep]
-            hit_end = end[hit][keep]
-        else:
-            hit_end = end[hit]
+            j, th, pre, hit_end = j[keep], th[keep], pre[:, keep], hit_end[keep]
         post = apply_law(pre, hit_end.astype(float), params, table, law)
         elapsed[j] += th
         t_impact = elapsed[j].copy()
@@ -147,7 +145,7 @@ def advance(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
         if stop_after is not None:
             done |= n_events[j] >= stop_after
         s[:, j] = post
-        act = np.concatenate([act[resume], act[hit][touch] if touch.any() else act[:0], j[~done]])
+        act = np.concatenate([act[resume], act[hit][touch], j[~done]])
         act.sort()
     if not logs:
         log = EventLog.empty()

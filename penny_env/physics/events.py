@@ -5,41 +5,22 @@ table, |p'| <= V and |p''| <= A (bounds from the linear-in-time angular velociti
 
     g'' <= M = L V^2 + G A          (L, G: the table's Hessian and gradient bounds).
 
-From a time t with g(t) <= 0 the quadratic g(t) + g'(t) tau + M tau^2 / 2 bounds g from above,
-and it stays <= 0 up to its positive root tau*. Stepping by tau* therefore never passes over an
-impact, however grazing (an impact that enters and leaves between two samples of any grid is
-still inside some step's bound). Near a transversal crossing the steps are Newton steps from
-below and converge quadratically; near a tangency they shrink geometrically. An impact is
-declared where g >= -delta with g' > 0 (delta = contact_tol * table size, a few ulps), then
-polished by one Newton step. Steps are at least sqrt(2 delta / M), which bounds any
-penetration by delta and the number of steps by settings.max_search_steps.
+From a time t the quadratic g(t) + g'(t) tau + M tau^2 / 2 bounds g from above, and it stays
+<= delta up to its positive root tau* (delta = contact_tol * table size, a few ulps of the
+table). Stepping by tau* therefore never passes over an impact deeper than delta, however
+grazing: an impact that enters and leaves between two samples of any grid is still inside some
+step's bound. Shallower "impacts" are below the round-off of the positions themselves. Near a
+transversal crossing the steps are Newton steps from below and converge quadratically; near a
+tangency they shrink geometrically (about 40% per step), so the step count stays small and is
+capped by settings.max_search_steps. An impact is declared where g >= -delta with g' > 0, then
+polished by one Newton step limited to sqrt(2 delta / M).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from .flow import THETA_DOT, PHI_DOT, flow, end_kinematics
-
-
-def acceleration_bound(W_lo, W_hi, w_lo, w_hi, acc1, acc2, params, table):
-    """M = L V^2 + G A over a time interval whose end-point angular speeds are given."""
-    R = params.R
-    Wm = np.maximum(np.abs(W_lo), np.abs(W_hi))
-    wm = np.maximum(np.abs(w_lo), np.abs(w_hi))
-    V2 = R * R * (Wm * Wm + wm * wm)
-    A = R * np.hypot(np.abs(acc2) + wm * wm, np.abs(acc1) + wm * Wm)
-    return table.hessian_bound * V2 + table.grad_bound * A
-
-
-def safe_step(g, gd, M):
-    """Largest tau with g + gd tau + M tau^2 / 2 <= 0 (g clamped to <= 0); inf if none bounds it."""
-    gc = np.minimum(g, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sq = np.sqrt(gd * gd - 2.0 * M * gc)
-        tau = np.where(gd <= 0.0, (sq - gd) / M, -2.0 * gc / (gd + sq))
-        # M == 0: no acceleration; only a linear approach can reach the wall
-        lin = np.where(gd > 0.0, -gc / gd, np.inf)
-    return np.where(M > 0.0, tau, lin)
+from .kernels import acceleration_bound, newton_polish, search_step, safe_step  # noqa: F401
 
 
 def wall_value(s, sigma, params, table):
@@ -72,18 +53,16 @@ def first_impact(s0, acc1, acc2, horizon, params, table, settings):
         hit_f = (gf >= -delta) & (gdf > 0.0)
         hit_b = (gb >= -delta) & (gdb > 0.0)
         hit = hit_f | hit_b
-        M = acceleration_bound(st[THETA_DOT], W_end[act], st[PHI_DOT], w_end[act], acc1[act], acc2[act], params, table)
-        tau_min = np.sqrt(2.0 * delta / np.where(M > 0, M, np.inf))
+        M = acceleration_bound(st[THETA_DOT], W_end[act], st[PHI_DOT], w_end[act], acc1[act], acc2[act],
+                               params.R, table.grad_bound, table.hessian_bound)
         if hit.any():
             front = hit_f & (~hit_b | (gdf >= gdb))
-            g = np.where(front, gf, gb)
-            gd = np.where(front, gdf, gdb)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                newton = np.where(g < 0.0, np.minimum(-g / gd, tau_min), 0.0)
+            g = np.where(front, gf, gb)[hit]
+            gd = np.where(front, gdf, gdb)[hit]
             idx = act[hit]
-            t_hit[idx] = np.minimum(ta[hit] + newton[hit], horizon[idx])
+            t_hit[idx] = np.minimum(np.maximum(ta[hit] + newton_polish(g, gd, M[hit], delta), 0.0), horizon[idx])
             end[idx] = np.where(front[hit], 1, -1)
-        tau = np.maximum(np.minimum(safe_step(gf, gdf, M), safe_step(gb, gdb, M)), tau_min)
+        tau = np.minimum(search_step(gf, gdf, M, delta), search_step(gb, gdb, M, delta))
         t_next = ta + tau
         keep = ~hit & (t_next < horizon[act])
         t[act] = t_next

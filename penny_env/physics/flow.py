@@ -22,55 +22,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels import angles_at, displacement_closed, end_point, sinc_kernels  # noqa: F401
+
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
 _GL_U = 0.5 * (_GL_NODES + 1.0)  # nodes on [0, 1]
 _GL_W = 0.5 * _GL_WEIGHTS
 MAX_PHASE_PER_PANEL = 3.0
-
-# j1(x) = sum_k (-1)^k (2k+2) x^(2k+1) / (2k+3)!, truncated where the terms drop below 1e-19 for |x| < 1
-_J1_COEFFS = []
-_f = 6.0  # (2k+3)! for k = 0
-for _k in range(10):
-    _J1_COEFFS.append((-1) ** _k * (2 * _k + 2) / _f)
-    _f *= (2 * _k + 4) * (2 * _k + 5)
-_J1_COEFFS = tuple(_J1_COEFFS)
-
-
-def sinc_kernels(x):
-    """j0(x) = sin(x)/x and j1(x) = (sin x - x cos x)/x^2, accurate to round-off for all x."""
-    x = np.asarray(x, dtype=float)
-    sn, cs = np.sin(x), np.cos(x)
-    small = np.abs(x) < 1.0
-    safe = np.where(small, 1.0, x)
-    x2 = x * x
-    series = np.full_like(x, _J1_COEFFS[-1])
-    for c in _J1_COEFFS[-2::-1]:
-        series = series * x2 + c
-    j1 = np.where(small, x * series, (sn - x * cs) / (safe * safe))
-    nonzero = np.where(x == 0.0, 1.0, x)
-    j0 = np.where(x == 0.0, 1.0, sn / nonzero)
-    return j0, j1
-
-
-def angles_at(s, acc1, acc2, t):
-    """theta, phi, theta_dot, phi_dot at time t (polynomials in t)."""
-    th = s[THETA] + t * (s[THETA_DOT] + 0.5 * acc2 * t)
-    ph = s[PHI] + t * (s[PHI_DOT] + 0.5 * acc1 * t)
-    return th, ph, s[THETA_DOT] + acc2 * t, s[PHI_DOT] + acc1 * t
-
-
-def _displacement_closed(W, w, ph, acc2, t, R):
-    half = 0.5 * w * t
-    j0, j1 = sinc_kernels(half)
-    mid = ph + half
-    cm, sm = np.cos(mid), np.sin(mid)
-    half_gain = 0.5 * acc2 * t
-    br = W * j0 + half_gain * j0
-    bi = half_gain * j1
-    Rt = R * t
-    return Rt * (cm * br - sm * bi), Rt * (sm * br + cm * bi)
 
 
 def panel_counts(w, acc1, t):
@@ -79,7 +38,9 @@ def panel_counts(w, acc1, t):
     return np.maximum(1, np.ceil(sweep / MAX_PHASE_PER_PANEL)).astype(np.int64)
 
 
-def _displacement_quadrature(W, w, ph, acc1, acc2, t, R):
+def displacement_quadrature(W, w, ph, acc1, acc2, t, R):
+    """Contact-point displacement over [0, t] with steering torque, (N,) arrays; per-penny sums
+    run in a fixed order, so a penny's result does not depend on the rest of the batch."""
     n = W.shape[0]
     k = panel_counts(w, acc1, t)
     owner = np.repeat(np.arange(n), k)
@@ -107,18 +68,18 @@ def flow(s, acc1, acc2, t, R):
     acc2 = np.broadcast_to(np.asarray(acc2, dtype=float), (n,))
     t = np.broadcast_to(np.asarray(t, dtype=float), (n,))
     out = np.empty_like(s)
-    th, ph, W1, w1 = angles_at(s, acc1, acc2, t)
-    out[THETA], out[PHI], out[THETA_DOT], out[PHI_DOT] = th, ph, W1, w1
+    out[THETA], out[PHI], out[THETA_DOT], out[PHI_DOT] = angles_at(
+        s[THETA], s[PHI], s[THETA_DOT], s[PHI_DOT], acc1, acc2, t)
     steer = acc1 != 0.0
     if not steer.any():
-        dx, dy = _displacement_closed(s[THETA_DOT], s[PHI_DOT], s[PHI], acc2, t, R)
+        dx, dy = displacement_closed(s[THETA_DOT], s[PHI_DOT], s[PHI], acc2, t, R)
     elif steer.all():
-        dx, dy = _displacement_quadrature(s[THETA_DOT], s[PHI_DOT], s[PHI], acc1, acc2, t, R)
+        dx, dy = displacement_quadrature(s[THETA_DOT], s[PHI_DOT], s[PHI], acc1, acc2, t, R)
     else:
         dx, dy = np.empty(n), np.empty(n)
         i, j = np.flatnonzero(~steer), np.flatnonzero(steer)
-        dx[i], dy[i] = _displacement_closed(s[THETA_DOT, i], s[PHI_DOT, i], s[PHI, i], acc2[i], t[i], R)
-        dx[j], dy[j] = _displacement_quadrature(s[THETA_DOT, j], s[PHI_DOT, j], s[PHI, j], acc1[j], acc2[j], t[j], R)
+        dx[i], dy[i] = displacement_closed(s[THETA_DOT, i], s[PHI_DOT, i], s[PHI, i], acc2[i], t[i], R)
+        dx[j], dy[j] = displacement_quadrature(s[THETA_DOT, j], s[PHI_DOT, j], s[PHI, j], acc1[j], acc2[j], t[j], R)
     out[X] = s[X] + dx
     out[Y] = s[Y] + dy
     return out
@@ -126,13 +87,7 @@ def flow(s, acc1, acc2, t, R):
 
 def end_kinematics(s, sigma, R):
     """Position and velocity of an end (sigma=+1 front, -1 back) for (6, N) states."""
-    c, sn = np.cos(s[PHI]), np.sin(s[PHI])
-    W, w = s[THETA_DOT], s[PHI_DOT]
-    sR = sigma * R
-    px, py = s[X] + sR * c, s[Y] + sR * sn
-    vx = R * W * c - sR * w * sn
-    vy = R * W * sn + sR * w * c
-    return px, py, vx, vy
+    return end_point(s[X], s[Y], s[PHI], s[THETA_DOT], s[PHI_DOT], sigma, R)
 
 
 def kinetic_energy(s, params):

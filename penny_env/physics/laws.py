@@ -13,9 +13,12 @@ Every law moves v along the metric gradient of n, v+ = v - k (a / (I + m R^2), b
   var_impact: the momentum jump lies in span(w1, w2, dh), v+ is on the distribution and the
   energy is kept (a reflection in the kinetic metric restricted to the distribution);
 * plastic = the paper's pi_Delta o P (var_penny, then the projection pi_Delta), which works out
-  to k = 2 n(v) / (|grad h|^2 / m + b^2 / J). When I > m R^2 this can leave the end still moving
-  into the wall (n(v+) > 0); the simulator then removes the normal velocity (the e = 0 law),
-  which is the limit of re-applying the plastic map at the same instant. Energy never increases.
+  to k = 2 n(v) / (|grad h|^2 / m + b^2 / J), i.e. restitution with an effective coefficient
+  e_p = 2 (a^2/(I+mR^2) + b^2/J) / (|grad h|^2/m + b^2/J) - 1 in (-1, 1). e_p < 0, an end still
+  moving into the wall after the impact, happens exactly when
+  2 m R^2 cos^2(beta) / (I + m R^2) + m R^2 sin^2(beta) / J < 1 (beta: heading vs wall normal), so
+  for I > m R^2 head-on or J > m R^2 sideways. The simulator then removes the normal velocity
+  (the e = 0 law), the limit of re-applying the plastic map at the same instant. Energy never increases.
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ import math
 import numpy as np
 
 from .flow import PHI, THETA_DOT, PHI_DOT, end_kinematics
+from .kernels import law_update
 
 
 @dataclass(frozen=True)
@@ -67,23 +71,11 @@ def normal_form(s, sigma, params, table):
     return a, b, hx * hx + hy * hy
 
 
-def apply_law(s, sigma, params, table, law: ImpactLaw, *, stick_outward=True):
+def apply_law(s, sigma, params, table, law: ImpactLaw):
     """Post-impact states (a new (6, N) array) for end sigma (scalar or (N,) array of +-1)."""
     s = np.asarray(s, dtype=float)
     a, b, g2 = normal_form(s, sigma, params, table)
-    Itot, J = params.rolling_inertia, params.J
-    W, w = s[THETA_DOT], s[PHI_DOT]
-    vn = a * W + b * w
-    metric = a * a / Itot + b * b / J  # > 0: grad h != 0 on the wall
-    if law.kind == "plastic":
-        k = 2.0 * vn / (g2 / params.m + b * b / J)
-        if stick_outward:
-            # end still moving outward after pi_Delta o P (needs I > m R^2): remove the normal velocity
-            still_out = (vn > 0) & (vn - k * metric > 0)
-            k = np.where(still_out, vn / metric, k)
-    else:
-        k = (1.0 + law.e) * vn / metric
     out = s.copy()
-    out[THETA_DOT] = W - k * a / Itot
-    out[PHI_DOT] = w - k * b / J
+    out[THETA_DOT], out[PHI_DOT] = law_update(s[THETA_DOT], s[PHI_DOT], a, b, g2, law.e, law.kind == "plastic",
+                                              params.rolling_inertia, params.J, params.m)
     return out

@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-from .advance import advance, relocate_inside
+from .advance import relocate_inside
+from .scalar import advance1, flow1
 from .flow import PHI_DOT, THETA_DOT, flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
@@ -57,12 +58,16 @@ class Trajectory:
         return kinetic_energy(self.impact_states.T, self.params)
 
 
-def _periodic_no_hit_chunk(s, acc1, acc2):
-    """For uncontrolled motion: one period (2 pi / |phi_dot|) or None when motion is a line."""
-    if acc1 != 0 or acc2 != 0:
-        return None
-    w = abs(s[PHI_DOT])
-    return 2 * math.pi / w if w > 0 else None
+def _free_chunk(state, params, table):
+    """Uncontrolled motion is periodic (period 2 pi / |phi_dot|) or a straight line that leaves
+    any table within (table width) / speed: a chunk of this length with no impact means the
+    penny never hits the wall again. inf for a penny at rest."""
+    w, W = abs(state[5]), abs(state[4])
+    if w > 0:
+        return 2 * math.pi / w
+    if W > 0 and table is not None:
+        return 4.0 * table.size / (params.R * W)
+    return math.inf
 
 
 def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impacts=None,
@@ -99,57 +104,59 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     check_inside(S, params, table)
     if table is not None:
         S = relocate_inside(S, params, table)
+    state = tuple(float(v) for v in S[:, 0])
 
     times, ends, states, rests = [], [], [], []
-    seg_t, seg_s, seg_acc = [0.0], [S[:, 0].copy()], []
+    seg_t, seg_s, seg_acc = [0.0], [state], []
     t = 0.0
     complete = True
     k = 0
     while True:
         if u is not None:
-            acc1, acc2 = u[k, 0] / params.J, u[k, 1] / params.rolling_inertia
+            acc1, acc2 = float(u[k, 0]) / params.J, float(u[k, 1]) / params.rolling_inertia
             chunk = min(cdt * (k + 1), t_final) - t
         else:
             acc1 = acc2 = 0.0
-            period = _periodic_no_hit_chunk(S[:, 0], acc1, acc2)
-            chunk = period if period is not None else 1.0
+            chunk = _free_chunk(state, params, table)
             if t_final is not None:
                 chunk = min(chunk, t_final - t)
+            elif chunk == math.inf:  # at rest, no impact ever
+                complete = False
+                break
         seg_acc.append((acc1, acc2))
         left = None if n_impacts is None else n_impacts - len(times)
-        S, log, elapsed = advance(S, acc1, acc2, chunk, params, table, law, settings, stop_after=left)
-        for i in range(log.time.shape[0]):
-            times.append(t + log.time[i])
-            ends.append(int(log.end[i]))
-            states.append(log.state[i])
-            seg_t.append(t + log.time[i])
-            seg_s.append(log.state[i].copy())
+        state, impacts, rest_events, elapsed = advance1(state, acc1, acc2, chunk, params, table, law, settings,
+                                                        stop_after=left)
+        for ti, end, post in impacts:
+            times.append(t + ti)
+            ends.append(end)
+            states.append(post)
+            seg_t.append(t + ti)
+            seg_s.append(post)
             seg_acc.append((acc1, acc2))
-        for tr, pinned in zip(log.rest_time, log.rest_pinned):
+        for tr, pinned in rest_events:
             rests.append(t + tr)
             if pinned:  # held against the wall until the interval ends
                 seg_acc[-1] = (0.0, 0.0)
-        t += float(elapsed[0])
+        t += elapsed
         if n_impacts is not None and len(times) >= n_impacts:
             t = times[-1]
             break
         if t_final is not None and t >= t_final * (1 - 1e-15):
             t = t_final
             break
-        if u is None and log.time.shape[0] == 0 and table is not None:
-            moving = S[THETA_DOT, 0] != 0 or S[PHI_DOT, 0] != 0
-            if not moving or _periodic_no_hit_chunk(S[:, 0], acc1, acc2) is not None:
-                # periodic motion with a full period free of impacts (or rest): none ever again
-                complete = False
-                if t_final is None:
-                    break
-                S = flow(S, 0.0, 0.0, t_final - t, params.R)
+        if u is None and not impacts:
+            # a whole free chunk without an impact: none ever again (_free_chunk)
+            complete = False
+            if t_final is not None:
+                state = flow1(state, 0.0, 0.0, t_final - t, params.R)
                 t = t_final
-                break
+            break
         if u is not None and t >= cdt * (k + 1) * (1 - 1e-15):
             k += 1
             seg_t.append(t)
-            seg_s.append(S[:, 0].copy())
+            seg_s.append(state)
+    S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
     return Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
                       final, float(t), np.array(rests), complete, params,
