@@ -126,3 +126,44 @@ def test_extra_scenes(sc):
     key = next(k for k in sc if k.startswith("state_at_"))
     at = tr if kw else pe.simulate(_arr(sc["initial_state"]), params=params, table=table, law=_law(sc), t_final=t_final, **kw)
     assert _state_close(at.final_state, _arr(sc[key]), 1e-9).all()
+
+
+FLOWS = json.loads((DATA / "flow_cases.json").read_text())["cases"]
+MAPS = json.loads((DATA / "impact_map_cases.json").read_text())["cases"]
+
+
+@pytest.mark.parametrize("case", FLOWS, ids=[c["tag"] for c in FLOWS])
+def test_flow_cases(case):
+    from penny_env.physics.flow import flow
+
+    p = _params(case["params"])
+    s0, ref = _arr(case["state0"]), _arr(case["state_t"])
+    acc1, acc2, t = float(case["u1"]) / p.J, float(case["u2"]) / p.rolling_inertia, float(case["t"])
+    out = flow(s0[:, None], acc1, acc2, t, p.R)[:, 0]
+    # round-off of the phase argument (eps |phi|) moves the contact point by R |theta_dot| t eps |phi|
+    phase = abs(ref[3]) + abs(s0[3])
+    travel = p.R * max(abs(s0[4]), abs(ref[4])) * t
+    pos_tol = 8e-16 * (abs(s0[0]) + abs(s0[1]) + abs(ref[0]) + abs(ref[1]) + travel * (1 + phase))
+    assert abs(out[0] - ref[0]) <= pos_tol and abs(out[1] - ref[1]) <= pos_tol, case["tag"]
+    np.testing.assert_allclose(out[2:], ref[2:], rtol=2e-15, atol=1e-300)
+
+
+@pytest.mark.parametrize("case", MAPS, ids=[f"case{c['case']}" for c in MAPS])
+def test_impact_map_cases(case):
+    p = _params(case["params"])
+    table = _table(case["table"])
+    pre, end = _arr(case["pre_state"]), int(case["end"])
+    scale = np.hypot(pre[4], pre[5])
+    for law, key in (("elastic", "post_elastic"), (float(case["restitution_e"]), "post_restitution"),
+                     ("plastic", "post_plastic")):
+        ours = pe.impact_map(pre, params=p, table=table, end=end, law=law)
+        ref = _arr(case[key])
+        if law == "plastic" and case["plastic_end_still_moving_outward"]:
+            # documented: the normal velocity left by pi_Delta o P is removed (sticking)
+            c, sn = np.cos(pre[3]), np.sin(pre[3])
+            hx, hy = table.grad(pre[0] + end * p.R * c, pre[1] + end * p.R * sn)
+            vn = p.R * ours[4] * (hx * c + hy * sn) + end * p.R * ours[5] * (hy * c - hx * sn)
+            assert abs(vn) <= 1e-12 * p.R * scale
+            continue
+        np.testing.assert_array_equal(ours[:4], pre[:4])
+        np.testing.assert_allclose(ours[4:], ref[4:], rtol=1e-12, atol=1e-13 * scale)
