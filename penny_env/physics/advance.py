@@ -10,8 +10,9 @@ Degenerate cases end in a defined state (documented in docs/physics.md):
 * an end on the wall still moving outward after the law (plastic with I > m R^2): the normal
   velocity is removed (laws.apply_law);
 * accumulation (Zeno), including both ends wedged against the wall: zeno_impacts consecutive
-  impacts each within zeno_window of the previous one, or max_events_per_interval impacts in
-  one interval, bring the penny to rest (theta_dot = phi_dot = 0). If the controls then push an
+  impacts each within max(zeno_window, 8 sqrt(2 delta / M)) of the previous one (a few time
+  resolutions of the search, below which impact gaps cannot shrink in float64), or
+  max_events_per_interval impacts in one interval, bring the penny to rest (theta_dot = phi_dot = 0). If the controls then push an
   end that touches the wall outward, the penny stays pinned until the interval ends.
 """
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from .flow import X, Y, PHI, THETA_DOT, PHI_DOT, flow, end_kinematics
 from .events import first_impact, wall_value
+from .kernels import acceleration_bound, time_resolution
 from .laws import apply_law
 
 
@@ -130,7 +132,11 @@ def advance(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
         elapsed[j] += th
         t_impact = elapsed[j].copy()
         n_events[j] += 1
-        streak[j] = np.where(th < settings.zeno_window, streak[j] + 1, 0)
+        M = acceleration_bound(pre[THETA_DOT], pre[THETA_DOT] + acc2[j] * (dt[j] - elapsed[j]), pre[PHI_DOT],
+                               pre[PHI_DOT] + acc1[j] * (dt[j] - elapsed[j]), acc1[j], acc2[j], params.R,
+                               table.grad_bound, table.hessian_bound)
+        window = np.maximum(settings.zeno_window, 8.0 * time_resolution(delta, M))
+        streak[j] = np.where(th < window, streak[j] + 1, 0)
         stuck = (streak[j] >= settings.zeno_impacts) | (n_events[j] >= settings.max_events_per_interval)
         done = np.zeros(j.shape[0], dtype=bool)
         if stuck.any():

@@ -42,6 +42,17 @@ _J1_REVERSED = tuple(_J1_COEFFS[::-1])
 
 def sinc_kernels(x, xp=np):
     """j0(x) = sin(x)/x and j1(x) = (sin x - x cos x)/x^2, accurate to round-off for all x."""
+    if xp is SCALAR:  # the same formulas, evaluating only the branch taken
+        sn, cs = math.sin(x), math.cos(x)
+        if abs(x) < 1.0:
+            x2 = x * x
+            series = 0.0
+            for c in _J1_REVERSED:
+                series = series * x2 + c
+            j1 = x * series
+        else:
+            j1 = (sn - x * cs) / (x * x)
+        return (1.0 if x == 0.0 else sn / x), j1
     sn, cs = xp.sin(x), xp.cos(x)
     small = xp.abs(x) < 1.0
     x2 = x * x
@@ -81,28 +92,87 @@ def end_point(x, y, ph, W, w, sigma, R, xp=np):
     return x + sR * c, y + sR * sn, R * W * c - sR * w * sn, R * W * sn + sR * w * c
 
 
-def acceleration_bound(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, grad_bound, hessian_bound, xp=np):
-    """M >= g'' = end'^T H end' + grad h . end'' over an interval, from end-point angular speeds:
-    |end'| <= R sqrt(W^2 + w^2), |end''| <= R sqrt((|acc2| + w^2)^2 + (|acc1| + |w W|)^2)."""
+def motion_bounds(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, xp=np):
+    """Bounds (V^2, A, J) on |p'|^2, |p''| and |p'''| of an end p over an interval, from the
+    end-point angular speeds (theta_dot and phi_dot are linear in time, so extremes are at the
+    ends). With s = +-1 the end, p' = R e^{i phi} (W + i s w),
+    p'' = R e^{i phi} [(acc2 - s w^2) + i (w W + s acc1)],
+    p''' = R e^{i phi} [(-w^2 W - 3 s w acc1) + i (2 w acc2 - s w^3 + acc1 W)]."""
     Wm = xp.maximum(xp.abs(W_lo), xp.abs(W_hi))
     wm = xp.maximum(xp.abs(w_lo), xp.abs(w_hi))
-    a_par = xp.abs(acc2) + wm * wm
-    a_perp = xp.abs(acc1) + wm * Wm
-    return hessian_bound * (R * R * (Wm * Wm + wm * wm)) + grad_bound * (R * xp.sqrt(a_par * a_par + a_perp * a_perp))
+    a1, a2 = xp.abs(acc1), xp.abs(acc2)
+    a_par = a2 + wm * wm
+    a_perp = a1 + wm * Wm
+    j_par = wm * wm * Wm + 3.0 * wm * a1
+    j_perp = 2.0 * wm * a2 + wm * wm * wm + a1 * Wm
+    return (R * R * (Wm * Wm + wm * wm), R * xp.sqrt(a_par * a_par + a_perp * a_perp),
+            R * xp.sqrt(j_par * j_par + j_perp * j_perp))
+
+
+def curvature_bounds(V2, A, J, grad_bound, hessian_bound, third_bound, xp=np):
+    """M >= g'' = p'^T H p' + grad h . p'' and K >= |g'''| (between Hessian jumps), g = h(p(t))."""
+    V = xp.sqrt(V2)
+    M = hessian_bound * V2 + grad_bound * A
+    K = third_bound * V2 * V + 3.0 * hessian_bound * V * A + grad_bound * J
+    return M, K
+
+
+def acceleration_bound(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, grad_bound, hessian_bound, xp=np):
+    """M >= g'' over an interval (see motion_bounds)."""
+    V2, A, _ = motion_bounds(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, xp)
+    return hessian_bound * V2 + grad_bound * A
+
+
+def local_curvature(ph, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, xp=np):
+    """g''(t) = p'^T H p' + grad h . p'' at the current state, exactly."""
+    c, sn = xp.cos(ph), xp.sin(ph)
+    vx = R * (W * c - sigma * w * sn)
+    vy = R * (W * sn + sigma * w * c)
+    ar = acc2 - sigma * w * w
+    ai = w * W + sigma * acc1
+    ax = R * (ar * c - ai * sn)
+    ay = R * (ar * sn + ai * c)
+    return hxx * vx * vx + 2.0 * hxy * vx * vy + hyy * vy * vy + hx * ax + hy * ay
+
+
+def curvature_step(g, gd, A, M, K, delta, xp=np):
+    """Certified step from the local curvature A >= g''(t) (Hessian-jump allowance included) and
+    |d^3 g/dt^3| <= K. By Taylor, g(t + s) <= g + gd s + (A + K tau / 3) s^2 / 2 for s <= tau, so
+    two windows are certified: tau = 3 (M - A) / (2 K) with curvature (A + M) / 2, and, when the end
+    curves away from the wall (A < 0), tau = 3 |A| / (2 K) with the concave curvature A / 2. Near a
+    tangency the second one turns the geometric shrinking of the global-bound steps into
+    Newton-like steps from below."""
+    gap = xp.maximum(M - A, 0.0)
+    if xp is SCALAR:
+        if not K > 0.0:
+            return search_step(g, gd, A, delta, xp)  # g'' is constant
+        step = min(search_step(g, gd, 0.5 * (A + M), delta, xp), 1.5 * gap / K)
+        if A < 0.0:
+            step = max(step, min(search_step(g, gd, 0.5 * A, delta, xp), -1.5 * A / K))
+        return step
+    pos = K > 0.0
+    Ks = xp.where(pos, K, 1.0)
+    step = xp.minimum(search_step(g, gd, 0.5 * (A + M), delta, xp), 1.5 * gap / Ks)
+    concave = xp.minimum(search_step(g, gd, 0.5 * A, delta, xp), -1.5 * A / Ks)
+    step = xp.where(A < 0.0, xp.maximum(step, concave), step)
+    return xp.where(pos, step, search_step(g, gd, A, delta, xp))
 
 
 def safe_step(g, gd, M, xp=np):
-    """Largest tau with g + gd tau + M tau^2 / 2 <= 0 (g clamped to <= 0), inf when unbounded."""
-    gc = xp.minimum(g, 0.0)
-    pos = M > 0.0
-    Ms = xp.where(pos, M, 1.0)
-    sq = xp.sqrt(gd * gd - 2.0 * Ms * gc)
-    inward = gd <= 0.0
-    den = xp.where(inward, 1.0, gd + sq)
-    quad = xp.where(inward, (sq - gd) / Ms, -2.0 * gc / den)
-    gds = xp.where(gd > 0.0, gd, 1.0)
-    lin = xp.where(gd > 0.0, -gc / gds, xp.inf)  # M == 0: only a linear approach reaches the wall
-    return xp.where(pos, quad, lin)
+    """Largest tau such that g + gd s + M s^2 / 2 <= 0 for all s in [0, tau] (g clamped to <= 0);
+    inf when the bound never reaches 0. M may be negative (a concave bound)."""
+    r = -xp.minimum(g, 0.0)
+    disc = gd * gd + 2.0 * M * r
+    if xp is SCALAR:
+        if gd > 0.0:
+            return 2.0 * r / (gd + math.sqrt(disc)) if disc >= 0.0 else math.inf
+        return (math.sqrt(disc) - gd) / M if M > 0.0 else math.inf
+    ok = disc >= 0.0
+    sq = xp.sqrt(xp.where(ok, disc, 0.0))
+    rising = gd > 0.0
+    towards = xp.where(ok, 2.0 * r / xp.where(rising, gd + sq, 1.0), xp.inf)
+    away = xp.where(M > 0.0, (sq - gd) / xp.where(M > 0.0, M, 1.0), xp.inf)
+    return xp.where(rising, towards, away)
 
 
 def search_step(g, gd, M, delta, xp=np):
@@ -111,10 +181,18 @@ def search_step(g, gd, M, delta, xp=np):
     return safe_step(g - delta, gd, M, xp)
 
 
+def time_resolution(delta, M, xp=np):
+    """sqrt(2 delta / M): the time over which the search cannot tell a graze of depth delta from
+    a touch. Impacts closer together than a few of these are an accumulation (Zeno)."""
+    if xp is SCALAR:
+        return math.sqrt(2.0 * delta / M) if M > 0.0 else math.inf
+    return xp.where(M > 0.0, xp.sqrt(2.0 * delta / xp.where(M > 0.0, M, 1.0)), xp.inf)
+
+
 def newton_polish(g, gd, M, delta, xp=np):
     """Newton correction -g/gd (gd > 0) of a time where the end is within delta of the wall,
     limited to sqrt(2 delta / M), the time over which the curvature can matter at that depth."""
-    cap = xp.where(M > 0.0, xp.sqrt(2.0 * delta / xp.where(M > 0.0, M, 1.0)), xp.inf)
+    cap = time_resolution(delta, M, xp)
     return xp.minimum(xp.maximum(-g / gd, -cap), cap)
 
 

@@ -12,8 +12,10 @@ import math
 import numpy as np
 
 from .flow import displacement_quadrature
-from .kernels import (SCALAR, acceleration_bound, angles_at, displacement_closed, end_point, law_update,
-                      newton_polish, search_step)
+from .events import third_order
+from .kernels import (SCALAR, acceleration_bound, angles_at, curvature_bounds, curvature_step, displacement_closed,
+                      end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
+                      time_resolution)
 
 
 def flow1(s, acc1, acc2, t, R):
@@ -36,6 +38,20 @@ def wall1(s, sigma, R, table):
     return table.h(px, py), hx * vx + hy * vy
 
 
+def end_step1(s, sigma, acc1, acc2, R, table, M, K, V2, delta, third, jump):
+    """(g, g', certified step) of one end (see events.end_step)."""
+    px, py, vx, vy = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
+    hx, hy = table.grad(px, py)
+    g = table.h(px, py)
+    gd = hx * vx + hy * vy
+    step = search_step(g, gd, M, delta, SCALAR)
+    if third and (gd <= 0.0 or gd * gd < 2.0 * M * abs(g)):
+        hxx, hxy, hyy = table.hessian(px, py)
+        A = local_curvature(s[3], s[4], s[5], acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, SCALAR)
+        step = max(step, curvature_step(g, gd, A + jump * V2, M, K, delta, SCALAR))
+    return g, gd, step
+
+
 def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
     """(t_hit, end) as events.first_impact: end 0 = none (t_hit inf), 2 = step budget spent."""
     R = params.R
@@ -43,20 +59,21 @@ def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
     W_end = s0[4] + acc2 * horizon
     w_end = s0[5] + acc1 * horizon
     G, L = table.grad_bound, table.hessian_bound
+    third, D3, jump = third_order(table)
     t = 0.0
     for _ in range(settings.max_search_steps):
         st = flow1(s0, acc1, acc2, t, R) if t != 0.0 else s0
-        gf, gdf = wall1(st, 1.0, R, table)
-        gb, gdb = wall1(st, -1.0, R, table)
+        V2, A, J = motion_bounds(st[4], W_end, st[5], w_end, acc1, acc2, R, SCALAR)
+        M, K = curvature_bounds(V2, A, J, G, L, D3, SCALAR)
+        gf, gdf, step_f = end_step1(st, 1.0, acc1, acc2, R, table, M, K, V2, delta, third, jump)
+        gb, gdb, step_b = end_step1(st, -1.0, acc1, acc2, R, table, M, K, V2, delta, third, jump)
         hit_f = gf >= -delta and gdf > 0.0
         hit_b = gb >= -delta and gdb > 0.0
-        M = acceleration_bound(st[4], W_end, st[5], w_end, acc1, acc2, R, G, L, SCALAR)
         if hit_f or hit_b:
             front = hit_f and (not hit_b or gdf >= gdb)
             g, gd = (gf, gdf) if front else (gb, gdb)
             return min(max(t + newton_polish(g, gd, M, delta, SCALAR), 0.0), horizon), (1 if front else -1)
-        tau = min(search_step(gf, gdf, M, delta, SCALAR), search_step(gb, gdb, M, delta, SCALAR))
-        t = t + tau
+        t = t + min(step_f, step_b)
         if not t < horizon:
             return math.inf, 0
     return t, 2
@@ -132,7 +149,11 @@ def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
         elapsed += t_hit
         t_impact = elapsed
         n_events += 1
-        streak = streak + 1 if t_hit < settings.zeno_window else 0
+        left = dt - elapsed
+        M = acceleration_bound(pre[4], pre[4] + acc2 * left, pre[5], pre[5] + acc1 * left, acc1, acc2, R,
+                               table.grad_bound, table.hessian_bound, SCALAR)
+        window = max(settings.zeno_window, 8.0 * time_resolution(delta, M, SCALAR))
+        streak = streak + 1 if t_hit < window else 0
         done = False
         if streak >= settings.zeno_impacts or n_events >= settings.max_events_per_interval:
             post = tuple(post[:4]) + (0.0, 0.0)

@@ -11,6 +11,11 @@ built with :class:`ConvexTable`):
 ``hessian_bound`` L >= Lipschitz constant of grad h over the closed table (sup of the
                Hessian's spectral norm where h is C^2).
 ``inradius``   radius of a disk that fits inside the table (a lower bound is fine).
+``hessian(x, y)`` optional: (hxx, hxy, hyy), vectorised. With it the search also uses a
+               third-order certificate (fast past near-tangencies), which needs:
+``third_derivative_bound`` sup |D^3 h[u, u, u]| over unit u where h is C^3 (0 if omitted);
+``hessian_jump`` sup of the jump of u^T (Hess h) u, unit u, across the lines where h is only
+               C^1,1 (0 if omitted).
 ``extent``     (xmin, xmax, ymin, ymax), a box containing the table.
 ============== ==============================================================================
 
@@ -102,6 +107,13 @@ class Ellipse(Table):
         c2 = 2.0 * self._half_c
         return c2 * x * self._ia2, c2 * y * self._ib2
 
+    third_derivative_bound = 0.0
+    hessian_jump = 0.0
+
+    def hessian(self, x, y):
+        c2 = 2.0 * self._half_c
+        return c2 * self._ia2 + 0.0 * x, 0.0 * x, c2 * self._ib2 + 0.0 * y
+
     def boundary(self, n: int = 256) -> np.ndarray:
         t = np.linspace(0.0, 2.0 * np.pi, n)
         return np.stack([self.a * np.cos(t), self.b * np.sin(t)], axis=1)
@@ -144,6 +156,8 @@ class Stadium(Table):
 
     def _offset(self, x, y):
         # vector from the nearest point of the central segment
+        if isinstance(x, float):
+            return x - min(max(x, -self._half), self._half), y
         return x - np.clip(x, -self._half, self._half), y
 
     def h(self, x, y):
@@ -153,6 +167,17 @@ class Stadium(Table):
     def grad(self, x, y):
         dx, dy = self._offset(x, y)
         return dx / self.radius, dy / self.radius
+
+    third_derivative_bound = 0.0
+
+    @property
+    def hessian_jump(self) -> float:
+        return 1.0 / self.radius  # the x-curvature switches on where a side meets a cap
+
+    def hessian(self, x, y):
+        dx, _ = self._offset(x, y)
+        inv = 1.0 / self.radius
+        return (dx != 0.0) * inv, 0.0 * x, inv + 0.0 * y
 
     def boundary(self, n: int = 256) -> np.ndarray:
         k = max(n // 2, 2)
