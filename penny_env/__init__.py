@@ -1,7 +1,11 @@
 """penny_env: an exact event-driven simulator of the bouncing penny and Gymnasium environments on it."""
 from .physics import (PennyParams, SolverSettings, Table, Ellipse, Circle, Stadium, ConvexTable,
                       simulate, impact_map, Trajectory)
+from .envs import PennyEnv, PennyVectorEnv, register_envs
 
 __version__ = "0.1.0"
 __all__ = ["PennyParams", "SolverSettings", "Table", "Ellipse", "Circle", "Stadium", "ConvexTable",
-           "simulate", "impact_map", "Trajectory"]
+           "simulate", "impact_map", "Trajectory", "PennyEnv", "PennyVectorEnv", "register_envs"]
+
+# the Gymnasium ids (configs/envs.yaml): gymnasium.make("penny_env:PennyReach-Ellipse-v0") works
+register_envs()

@@ -89,3 +89,17 @@ def test_velocity_is_on_the_distribution(seed, steer):
     v = (pm[:2, 2] - pm[:2, 0]) / (2 * h)
     expected = R * pm[4, 1] * np.array([np.cos(pm[3, 1]), np.sin(pm[3, 1])])
     np.testing.assert_allclose(v, expected, rtol=1e-6, atol=1e-9 * R * (1 + abs(pm[4, 1])))
+
+
+@pytest.mark.parametrize("limit", [0.5, 1.5, 3.0])
+@pytest.mark.parametrize("split", [1.0, 0.6, 0.2, 0.0])
+def test_quadrature_rules_reach_round_off_at_their_limits(limit, split):
+    # phase sweep exactly at a rule's limit, shared between the linear (phi_dot) and quadratic (u1) parts
+    t = 0.05
+    w = split * limit / t
+    acc1 = (1 - split) * limit / (1.5 * t * t)
+    s = (0.01, -0.02, 0.0, 0.4, 30.0, w)
+    out = flow(np.array(s, float)[:, None], acc1, 3.0, t, R)[:, 0]
+    rx, ry = mp_flow_xy(s, acc1, 3.0, t)
+    disp = np.hypot(float(rx) - s[0], float(ry) - s[1])
+    assert np.hypot(out[0] - float(rx), out[1] - float(ry)) <= 2e-15 * disp + 4e-17

@@ -303,8 +303,12 @@ def run_simulate(state, *, params, table, law, n_impacts=None, t_stop, t_sample=
 
 def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample=None, controls=None,
                   control_dt=None, env_dt=0.05, settings: SolverSettings | None = None,
-                  wall_budget=None) -> HybridResult:
-    """The environment's step path: penny_env.physics.advance on a batch of one over intervals of env_dt."""
+                  wall_budget=None, scalar: bool = False) -> HybridResult:
+    """The environment's step path: penny_env.physics.advance on a batch of one over intervals of env_dt
+    (scalar=True: penny_env.physics.scalar.advance1, the plain-float event loop of the single env's fast
+    path, bitwise equal to advance)."""
+    if scalar:
+        from ..physics.scalar import advance1
     _check_stop(n_impacts, t_stop, t_sample)
     settings = SolverSettings() if settings is None else settings
     law = make_law(law)
@@ -329,17 +333,26 @@ def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample
         t_b = float(bps[np.searchsorted(bps, t * (1 + 1e-15), side="right")]) if bps.size else math.inf
         t_next = min(t_env, t_b)
         a1, a2 = _accels(t, controls, control_dt, params)
-        S, log, _ = advance(S, a1, a2, t_next - t, params, table, law, settings)
-        for i in range(log.time.shape[0]):
-            times.append(t + float(log.time[i]))
-            ends.append(int(log.end[i]))
-            states.append(log.state[i].copy())
-            walls.append(_hit_wall(log.state[i], log.end[i], params, table))
+        if scalar:
+            st, impacts, _, _ = advance1(tuple(float(v) for v in S[:, 0]), a1, a2, t_next - t, params, table, law,
+                                         settings)
+            S = np.array(st, dtype=float)[:, None]
+            for ti, end, post in impacts:
+                times.append(t + float(ti))
+                ends.append(int(end))
+                states.append(np.array(post, dtype=float))
+        else:
+            S, log, _ = advance(S, a1, a2, t_next - t, params, table, law, settings)
+            for i in range(log.time.shape[0]):
+                times.append(t + float(log.time[i]))
+                ends.append(int(log.end[i]))
+                states.append(log.state[i].copy())
         t = t_next
         if t >= t_env * (1 - 1e-15):
             k += 1
     if n_impacts is not None and len(times) > n_impacts:
-        times, ends, states, walls = times[:n_impacts], ends[:n_impacts], states[:n_impacts], walls[:n_impacts]
+        times, ends, states = times[:n_impacts], ends[:n_impacts], states[:n_impacts]
+    walls = [_hit_wall(p, e, params, table) for p, e in zip(states, ends)]
     return _finish(times, ends, states, S[:, 0], t, sample, status, k, walls, params)
 
 

@@ -27,9 +27,15 @@ class Match:
     max_abs_err: float  # over matched impacts (nan if none)
     first_divergence: int | None  # index of the first reference impact not matched (None if all)
     pairs: list         # (i_ref, j_found)
+    missed_unresolvable: int = 0  # missed reference impacts that float64 cannot resolve (see below)
+
+    @property
+    def missed_resolvable(self) -> int:
+        return self.missed - self.missed_unresolvable
 
     def summary(self) -> str:
-        return f"{self.matched}/{self.n_ref} found, {self.missed} missed, {self.spurious} spurious"
+        extra = f" ({self.missed_unresolvable} below float64 resolution)" if self.missed_unresolvable else ""
+        return f"{self.matched}/{self.n_ref} found, {self.missed} missed{extra}, {self.spurious} spurious"
 
 
 def default_tol(t_ref: np.ndarray) -> float:
@@ -39,7 +45,9 @@ def default_tol(t_ref: np.ndarray) -> float:
     return float(min(0.05, max(1e-9, 0.45 * gap)))
 
 
-def match_impacts(t_ref, e_ref, t, e, *, t_end=np.inf, n_ref_max=None, match_tol=None) -> Match:
+def match_impacts(t_ref, e_ref, t, e, *, t_end=np.inf, n_ref_max=None, match_tol=None, unresolvable=None) -> Match:
+    """unresolvable: optional boolean mask over the reference impacts that float64 cannot resolve
+    (reference.wall_excursions(scene) <= contact tolerance); their misses are counted apart."""
     t_ref = np.asarray(t_ref, float)
     e_ref = np.asarray(e_ref)
     if n_ref_max is not None:
@@ -87,8 +95,12 @@ def match_impacts(t_ref, e_ref, t, e, *, t_end=np.inf, n_ref_max=None, match_tol
     errs = [abs(t_ref[a] - t[b]) for a, b in pairs]
     matched_ref = {a for a, _ in pairs}
     first_div = next((k for k in range(n) if k not in matched_ref), None)
+    n_unres = 0
+    if unresolvable is not None:
+        unres = np.asarray(unresolvable, bool)
+        n_unres = sum(1 for k in range(n) if k not in matched_ref and k < unres.size and unres[k])
     return Match(n, m, len(pairs), n - len(pairs), m - len(pairs), max(errs) if errs else float("nan"),
-                 first_div, pairs)
+                 first_div, pairs, n_unres)
 
 
 def state_error(s, s_ref) -> float:
@@ -102,3 +114,11 @@ def position_error(s, s_ref) -> float:
     if s is None:
         return float("nan")
     return float(np.hypot(s[0] - s_ref[0], s[1] - s_ref[1]))
+
+
+def unresolvable_mask(sc) -> np.ndarray:
+    """Reference impacts of a scene whose wall excursion is within penny_env's contact tolerance."""
+    from ..physics import SolverSettings
+    from .reference import wall_excursions
+    ex = wall_excursions(sc)
+    return np.nan_to_num(ex, nan=np.inf) <= SolverSettings().contact_tol * sc.table.size

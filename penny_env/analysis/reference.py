@@ -176,3 +176,39 @@ def impact_map_cases() -> list[ImpactMapCase]:
                                   "restitution": _arr(d["post_restitution"])},
                                  float(d["restitution_e"]), bool(d["plastic_end_still_moving_outward"])))
     return out
+
+
+def wall_excursions(sc: Scene, window: float = 1e-2) -> np.ndarray:
+    """For each reference impact of an uncontrolled scene: how far (h, metres in penny_env's table
+    scaling) the hitting end would go past the wall if the impact did not happen, computed in
+    float64 with penny_env's exact flow from the reference's previous post-impact state (the max
+    of h along the free flight near the impact time, located by bisection on dh/dt). Impacts
+    whose excursion is below SolverSettings().contact_tol x table size cannot be resolved in
+    float64 (the whole grazing event is inside the round-off of h). nan for controlled scenes."""
+    from ..physics.events import wall_value
+    from ..physics.flow import flow
+    out = np.full(sc.n_impacts, np.nan)
+    if sc.controls is not None:
+        return out
+    P, T = sc.params, sc.table
+    for i in range(sc.n_impacts):
+        s = (sc.impact_states[i - 1] if i > 0 else sc.initial_state)[:, None]
+        t0 = float(sc.impact_times[i - 1]) if i > 0 else 0.0
+        sig = float(sc.impact_ends[i])
+        tc = float(sc.impact_times[i]) - t0
+        lo, hi = max(tc - window, 0.0), tc + window
+
+        def g(t):
+            v, d = wall_value(flow(s, 0.0, 0.0, t, P.R), sig, P, T)
+            return float(v[0]), float(d[0])
+        if g(hi)[1] > 0:  # still rising at the window's end: a transversal impact, not grazing
+            out[i] = np.inf
+            continue
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            if g(mid)[1] > 0:
+                lo = mid
+            else:
+                hi = mid
+        out[i] = g(lo)[0]
+    return out

@@ -9,13 +9,33 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
-from .flow import displacement_quadrature
+from .flow import MAX_PHASE_PER_PANEL, RULES, phase_sweep
 from .events import third_order
 from .kernels import (SCALAR, acceleration_bound, angles_at, curvature_bounds, curvature_step, displacement_closed,
                       end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
                       time_resolution)
+
+
+def displacement1(W, w, ph, acc1, acc2, t, R):
+    """flow.displacement_quadrature for one penny, in the same order of operations."""
+    sweep = phase_sweep(w, acc1, t, SCALAR)
+    k = max(1, math.ceil(sweep / MAX_PHASE_PER_PANEL))
+    per_panel = sweep / k
+    _, nodes, weights = next((r for r in RULES[:-1] if per_panel <= r[0]), RULES[-1])
+    width = t / k
+    dx = dy = 0.0
+    cos, sin = math.cos, math.sin
+    for p in range(k):
+        px = py = 0.0
+        for u, wt in zip(nodes, weights):
+            s = (p + u) * width
+            phase = ph + s * (w + 0.5 * acc1 * s)
+            amp = (W + acc2 * s) * wt
+            px += amp * cos(phase)
+            py += amp * sin(phase)
+        dx += px * width
+        dy += py * width
+    return R * dx, R * dy
 
 
 def flow1(s, acc1, acc2, t, R):
@@ -25,9 +45,7 @@ def flow1(s, acc1, acc2, t, R):
     if acc1 == 0.0:
         dx, dy = displacement_closed(W, w, ph, acc2, t, R, SCALAR)
     else:
-        one = lambda v: np.array([v], dtype=float)  # noqa: E731
-        qx, qy = displacement_quadrature(one(W), one(w), one(ph), one(acc1), one(acc2), one(t), R)
-        dx, dy = float(qx[0]), float(qy[0])
+        dx, dy = displacement1(W, w, ph, acc1, acc2, t, R)
     return (x + dx, y + dy, th1, ph1, W1, w1)
 
 

@@ -1,0 +1,156 @@
+"""Throughput of the environments, side by side with Gymnasium's classic-control envs.
+
+    python -m penny_env.analysis.throughput [--quick] [--out docs/throughput.md]
+
+Measured in one run on this machine:
+
+* single env through ``gymnasium.make`` (wrappers included): every Penny preset, Pendulum-v1 and
+  CartPole-v1; microseconds per step and the ratio to Pendulum-v1 (random actions drawn beforehand,
+  resets included);
+* PennyVectorEnv at N = 1, 16, 256, 4096 (``gymnasium.make_vec``, native) against gymnasium's
+  SyncVectorEnv of PennyEnv and CartPole-v1's native vector env, in env-steps per second, and the
+  peak memory per env of PennyVectorEnv (tracemalloc, construction + reset + steps).
+
+``--quick`` (used by the tests) runs few steps, N up to 256 and two presets.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import gc
+import os
+import platform
+import shlex
+import sys
+import time
+import tracemalloc
+
+import numpy as np
+import gymnasium as gym
+
+import penny_env  # noqa: F401  (registers the ids)
+from penny_env.envs.registration import env_ids
+
+WALLED = "PennyImpacts-Stadium-v0"
+VECTOR_PRESETS = ("PennyReach-Ellipse-v0", "PennyImpacts-Stadium-v0", "PennyReach-Plane-v0", "PennyDrive-Circle-v0")
+
+
+def _cpu() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def single_step_us(env_id: str, steps: int, seed: int = 0) -> tuple[float, float]:
+    """(us per step through gymnasium.make, impacts per step)."""
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    acts = [env.action_space.sample() for _ in range(steps)]
+    for a in acts[: min(50, steps)]:  # warm up
+        _, _, te, tr, _ = env.step(a)
+        if te or tr:
+            env.reset()
+    impacts = 0
+    t0 = time.perf_counter()
+    for a in acts:
+        _, _, te, tr, info = env.step(a)
+        impacts += info.get("impacts", 0)
+        if te or tr:
+            env.reset()
+    dt = time.perf_counter() - t0
+    env.close()
+    return dt / steps * 1e6, impacts / steps
+
+
+def vector_rate(make, n: int, steps: int, seed: int = 0) -> float:
+    """env-steps per second of a vector env (random actions drawn beforehand)."""
+    venv = make(n)
+    venv.reset(seed=seed)
+    venv.action_space.seed(seed)
+    acts = [venv.action_space.sample() for _ in range(steps)]
+    for a in acts[: min(3, steps)]:
+        venv.step(a)
+    t0 = time.perf_counter()
+    for a in acts:
+        venv.step(a)
+    dt = time.perf_counter() - t0
+    venv.close()
+    return n * steps / dt
+
+
+def peak_memory_per_env(env_id: str, n: int, steps: int = 5) -> float:
+    gc.collect()
+    tracemalloc.start()
+    venv = gym.make_vec(env_id, num_envs=n)
+    venv.reset(seed=0)
+    a = np.zeros(venv.action_space.shape, np.float32)
+    for _ in range(steps):
+        venv.step(a)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    venv.close()
+    return peak / n
+
+
+def _steps_for(n: int, quick: bool) -> int:
+    budget = 20_000 if quick else 400_000  # env-steps per measurement
+    return max(3, min(200 if quick else 1000, budget // n))
+
+
+def main(argv: list[str] | None = None) -> str:
+    argv = sys.argv[1:] if argv is None else argv
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="few steps, N <= 256 (for tests)")
+    ap.add_argument("--out", default=None, help="write a Markdown report here")
+    args = ap.parse_args(argv)
+    quick = args.quick
+    single_steps = 1000 if quick else 20_000
+    lines = ["# Throughput of penny_env", "",
+             f"- machine: {platform.platform()}, CPU: {_cpu()} ({os.cpu_count()} logical cores)",
+             f"- Python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}",
+             f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
+             f"- command: `python -m penny_env.analysis.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
+             "", "## Single environment (gymnasium.make, random actions, resets included)", "",
+             "| env | us/step | steps/s | vs Pendulum-v1 (time ratio) | impacts/step |", "| --- | ---: | ---: | ---: | ---: |"]
+    pend, _ = single_step_us("Pendulum-v1", single_steps)
+    cart, _ = single_step_us("CartPole-v1", single_steps)
+    ids = [WALLED, "PennyReach-Plane-v0"] if quick else env_ids()
+    rows = [("Pendulum-v1", pend, 0.0), ("CartPole-v1", cart, 0.0)]
+    for env_id in ids:
+        us, imp = single_step_us(env_id, single_steps)
+        rows.append((env_id, us, imp))
+    for name, us, imp in rows:
+        lines.append(f"| {name} | {us:.1f} | {1e6 / us:,.0f} | {us / pend:.2f} | {imp:.3f} |")
+        print(f"single {name:28s} {us:7.1f} us/step  x{us / pend:.2f} Pendulum  impacts/step {imp:.3f}", flush=True)
+    sizes = (1, 16, 256) if quick else (1, 16, 256, 4096)
+    presets = (WALLED, "PennyReach-Plane-v0") if quick else VECTOR_PRESETS
+    lines += ["", "## Vector environments (env-steps per second, random actions)", "",
+              "| env | N | PennyVectorEnv | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for env_id in presets:
+        for n in sizes:
+            steps = _steps_for(n, quick)
+            native = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k), n, steps)
+            sync_steps = max(3, min(steps, (2_000 if quick else 40_000) // n))
+            sync = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, vectorization_mode="sync"), n, sync_steps)
+            cp = vector_rate(lambda k: gym.make_vec("CartPole-v1", num_envs=k, vectorization_mode="vector_entry_point"), n, steps)
+            mem = peak_memory_per_env(env_id, n)
+            lines.append(f"| {env_id} | {n} | {native:,.0f} | {sync:,.0f} | {native / sync:.1f} | {cp:,.0f} | {mem / 1024:.1f} KiB |")
+            print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
+                  f"  CartPole {cp:12,.0f}/s  mem/env {mem / 1024:.1f} KiB", flush=True)
+    report = "\n".join(lines) + "\n"
+    if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+        with open(args.out, "w") as f:
+            f.write(report)
+    return report
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""Batched physics for analysis code: many pennies at once, states as (N, 6) rows.
+
+Rows are (x, y, theta, phi, theta_dot, phi_dot) (the user-facing layout; the physics core works
+on (6, N) columns). Controls are torques (u1, u2) [N m]: ``J phi'' = u1``, ``(I + m R^2) theta'' = u2``.
+Tables are Table objects, spec dicts ({"kind": "ellipse", "a": .., "b": ..}) or None (open plane);
+laws "elastic", "plastic" or a restitution coefficient. Every input is checked and errors name the
+field and the row (``states[3] has a non-finite phi``).
+
+>>> import numpy as np, penny_env.batch as pb
+>>> res = pb.simulate(np.array([[0, 0, 0, 1.57, 10, 0.2]] * 4), table={"kind": "circle", "r": 0.2},
+...                   law="elastic", t_final=2.0)
+>>> res.final_states.shape
+(4, 6)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .physics import SolverSettings, advance, make_law, make_table  # noqa: F401 (make_table re-exported)
+from .physics import apply_law, end_kinematics
+from .physics import first_impact as _first_impact
+from .physics import flow as _flow
+from .physics.validation import as_states, check_inside, check_params, check_table, positive_time
+
+__all__ = ["flow", "first_impact", "impact_map", "simulate", "BatchResult"]
+
+_UNCONTROLLED_CHUNK = 0.1  # [s] interval length when simulating without controls (bounds the work per call)
+
+
+def _table(table, params):
+    try:
+        t = make_table(table)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"table: {exc}") from None
+    return check_table(t, params)
+
+
+def _controls(controls, n, params, name="controls"):
+    """(acc1, acc2) arrays of length n from (2,) or (N, 2) torques."""
+    try:
+        u = np.array(controls, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be (u1, u2) torques, shape (2,) or (N, 2)") from None
+    if u.shape == (2,):
+        u = np.broadcast_to(u, (n, 2))
+    if u.shape != (n, 2):
+        raise ValueError(f"{name} must have shape (2,) or ({n}, 2), got {u.shape}")
+    bad = ~np.isfinite(u).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{name}[{int(np.flatnonzero(bad)[0])}] is not finite")
+    return u[:, 0] / params.J, u[:, 1] / params.rolling_inertia
+
+
+def _times(t, n, name):
+    try:
+        arr = np.array(t, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number or an (N,) array") from None
+    arr = np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < 0)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{name}[{k}] must be finite and >= 0, got {arr[k]!r}")
+    return np.ascontiguousarray(arr, dtype=float)
+
+
+def flow(states, controls, t, *, params=None) -> np.ndarray:
+    """(N, 6) states after time t (scalar or (N,)) with constant torques, ignoring walls."""
+    params = check_params(params)
+    S = as_states(states)
+    n = S.shape[1]
+    acc1, acc2 = _controls(controls, n, params)
+    return _flow(S, acc1, acc2, _times(t, n, "t"), params.R).T.copy()
+
+
+def first_impact(states, controls, horizon, *, params=None, table, settings=None):
+    """(t_hit, end) of the first impact within horizon (scalar or (N,)) under constant torques:
+    t_hit (N,) [s] (inf where none), end (N,) int8: +1 front, -1 back, 0 none."""
+    params = check_params(params)
+    if table is None:
+        raise ValueError("table: first_impact needs a table (the open plane has no walls)")
+    tab = _table(table, params)
+    S = as_states(states)
+    n = S.shape[1]
+    check_inside(S, params, tab, "states")
+    acc1, acc2 = _controls(controls, n, params)
+    h = _times(horizon, n, "horizon")
+    t_hit, end = _first_impact(S, np.ascontiguousarray(acc1), np.ascontiguousarray(acc2), h, params, tab,
+                               settings or SolverSettings())
+    # a search stopped on its step budget (end 2) is not an impact found
+    return np.where(end == 2, np.inf, t_hit), np.where(end == 2, 0, end).astype(np.int8)
+
+
+def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray:
+    """(N, 6) post-impact states for states whose end ends[i] (+1 front, -1 back) is on the wall."""
+    params = check_params(params)
+    if table is None:
+        raise ValueError("table: impact_map needs a table")
+    tab = _table(table, params)
+    law = make_law(law)
+    S = as_states(states)
+    n = S.shape[1]
+    e = np.array(ends).reshape(-1) if np.ndim(ends) else np.full(n, ends)
+    if e.shape != (n,):
+        raise ValueError(f"ends must be +-1 or have shape ({n},), got {np.shape(ends)}")
+    badend = ~np.isin(e, (1, -1))
+    if badend.any():
+        k = int(np.flatnonzero(badend)[0])
+        raise ValueError(f"ends[{k}] must be +1 (front) or -1 (back), got {e[k]!r}")
+    e = e.astype(float)
+    px, py, _, _ = end_kinematics(S, e, params.R)
+    g = tab.h(px, py)
+    off = np.abs(g) > 1e-8 * tab.size
+    if off.any():
+        k = int(np.flatnonzero(off)[0])
+        raise ValueError(f"states[{k}]: the {'front' if e[k] > 0 else 'back'} end is not on the wall (h = {g[k]:.3g})")
+    return apply_law(S, e, params, tab, law).T.copy()
+
+
+@dataclass
+class BatchResult:
+    """Result of :func:`simulate`: final_states (N, 6); impact_counts (N,); the impacts of all
+    pennies sorted by penny then time: impact_env, impact_times [s since the start], impact_ends
+    (+1/-1), impact_states (k, 6) right after each impact."""
+
+    final_states: np.ndarray
+    impact_counts: np.ndarray
+    impact_env: np.ndarray
+    impact_times: np.ndarray
+    impact_ends: np.ndarray
+    impact_states: np.ndarray
+
+    def times_of(self, i: int) -> np.ndarray:
+        """Impact times of penny i."""
+        return self.impact_times[self.impact_env == i]
+
+
+def simulate(states, *, params=None, table, law="elastic", t_final, controls=None, control_dt=None,
+             settings=None) -> BatchResult:
+    """Simulate N pennies to t_final with every impact, batched (a loop over control intervals,
+    never over pennies). controls: None (free motion), (K, 2) torques shared by all pennies or
+    (K, N, 2) per penny, row k held on [k, k+1) control_dt; K control_dt must cover t_final."""
+    params = check_params(params)
+    tab = _table(table, params)
+    law = make_law(law)
+    settings = settings or SolverSettings()
+    S = as_states(states)
+    n = S.shape[1]
+    if tab is not None:
+        check_inside(S, params, tab, "states")
+    t_final = positive_time(t_final, "t_final")
+    if controls is None:
+        if control_dt is not None:
+            raise ValueError("control_dt is given but controls is None")
+        k_steps = int(np.ceil(t_final / _UNCONTROLLED_CHUNK))
+        dts = [_UNCONTROLLED_CHUNK] * (k_steps - 1) + [t_final - _UNCONTROLLED_CHUNK * (k_steps - 1)]
+        acc = [(np.zeros(n), np.zeros(n))] * k_steps
+    else:
+        if control_dt is None:
+            raise ValueError("control_dt is required when controls are given")
+        control_dt = positive_time(control_dt, "control_dt")
+        try:
+            u = np.array(controls, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError("controls must be a (K, 2) or (K, N, 2) array of torques") from None
+        if u.ndim == 2 and u.shape[1] == 2:
+            u = np.broadcast_to(u[:, None, :], (u.shape[0], n, 2))
+        if u.ndim != 3 or u.shape[1:] != (n, 2) or u.shape[0] == 0:
+            raise ValueError(f"controls must have shape (K, 2) or (K, {n}, 2), got {np.shape(controls)}")
+        bad = ~np.isfinite(u)
+        if bad.any():
+            k, i, _ = np.argwhere(bad)[0]
+            raise ValueError(f"controls[{k}] for penny {i} is not finite")
+        k_steps = int(np.ceil(t_final / control_dt - 1e-12))
+        if k_steps > u.shape[0]:
+            raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * control_dt} (K * control_dt)")
+        dts = [control_dt] * (k_steps - 1) + [t_final - control_dt * (k_steps - 1)]
+        acc = [(u[k, :, 0] / params.J, u[k, :, 1] / params.rolling_inertia) for k in range(k_steps)]
+    envs, times, ends, posts = [], [], [], []
+    t0 = 0.0
+    for (acc1, acc2), dt in zip(acc, dts):
+        S, log, _ = advance(S, acc1, acc2, dt, params, tab, law, settings)
+        if log.env.size:
+            envs.append(log.env)
+            times.append(t0 + log.time)
+            ends.append(log.end)
+            posts.append(log.state)
+        t0 += dt
+    if envs:
+        env = np.concatenate(envs)
+        order = np.argsort(env, kind="stable")
+        res = (env[order], np.concatenate(times)[order], np.concatenate(ends)[order], np.concatenate(posts)[order])
+    else:
+        res = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 6)))
+    return BatchResult(S.T.copy(), np.bincount(res[0], minlength=n), *res)

@@ -1,0 +1,7 @@
+"""Gymnasium environments of the controlled bouncing penny (see PennyEnv's docstring)."""
+from .scene import Scene, Task, ConfigError, resolve
+from .penny_env import PennyEnv
+from .vector_env import PennyVectorEnv
+from .registration import register_envs, env_ids
+
+__all__ = ["Scene", "Task", "ConfigError", "resolve", "PennyEnv", "PennyVectorEnv", "register_envs", "env_ids"]

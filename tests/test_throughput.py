@@ -1,0 +1,11 @@
+"""The throughput benchmark command runs (--quick) and writes its Markdown report."""
+from penny_env.analysis import throughput
+
+
+def test_throughput_quick(tmp_path):
+    out = tmp_path / "throughput.md"
+    report = throughput.main(["--quick", "--out", str(out)])
+    text = out.read_text()
+    assert text == report
+    for needle in ("Pendulum-v1", "CartPole-v1", "PennyImpacts-Stadium-v0", "SyncVectorEnv", "| 256 |", "command:", "date:"):
+        assert needle in text

@@ -1,0 +1,1 @@
+"""Baseline agents (Stable-Baselines3) on penny_env's environments."""
