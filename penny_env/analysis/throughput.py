@@ -108,6 +108,8 @@ def main(argv: list[str] | None = None) -> str:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="few steps, N <= 256 (for tests)")
     ap.add_argument("--out", default=None, help="write a Markdown report here")
+    ap.add_argument("--readme", default=None, help="also replace the block between <!-- throughput:start --> and "
+                                                    "<!-- throughput:end --> in this file (README.md) with the tables")
     args = ap.parse_args(argv)
     quick = args.quick
     single_steps = 1000 if quick else 20_000
@@ -145,11 +147,27 @@ def main(argv: list[str] | None = None) -> str:
             print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
                   f"  CartPole {cp:12,.0f}/s  mem/env {mem / 1024:.1f} KiB", flush=True)
     report = "\n".join(lines) + "\n"
+    if args.readme:
+        update_readme(args.readme, lines)
     if args.out:
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
         with open(args.out, "w") as f:
             f.write(report)
     return report
+
+
+def update_readme(path: str, lines: list[str]) -> None:
+    """Put the report's tables (and its machine, date and command lines) between the README's markers."""
+    start, end = "<!-- throughput:start -->", "<!-- throughput:end -->"
+    with open(path) as f:
+        text = f.read()
+    if start not in text or end not in text:
+        raise ValueError(f"{path}: no {start} ... {end} block to replace")
+    body = [ln.replace("## ", "#### ", 1) if ln.startswith("## ") else ln for ln in lines[2:]]
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    with open(path, "w") as f:
+        f.write(head + start + "\n" + "\n".join(body) + "\n" + end + tail)
 
 
 if __name__ == "__main__":
