@@ -42,8 +42,9 @@ def third_order(table):
     return True, float(getattr(table, "third_derivative_bound", 0.0)), float(getattr(table, "hessian_jump", 0.0))
 
 
-def end_step(s, sigma, acc1, acc2, params, table, M, K, V2, delta, third, jump):
-    """(g, g', certified step) of one end for (6, N) states."""
+def end_step(s, sigma, acc1, acc2, params, table, M, K, V2, delta, third, jump, rem):
+    """(g, g', certified step) of one end for (6, N) states; rem: time left to the horizon (the
+    curvature step is not needed where the plain step already reaches it)."""
     R = params.R
     px, py, vx, vy = end_kinematics(s, sigma, R)
     hx, hy = table.grad(px, py)
@@ -52,12 +53,12 @@ def end_step(s, sigma, acc1, acc2, params, table, M, K, V2, delta, third, jump):
     step = search_step(g, gd, M, delta)
     if third:
         # moving away, or near a tangency (curvature dominates the approach speed): try the local curvature
-        near = (gd <= 0.0) | (gd * gd < 2.0 * M * np.abs(g))
+        near = (step < rem) & ((gd <= 0.0) | (gd * gd < 2.0 * M * np.abs(g)))
         if near.any():
             i = np.flatnonzero(near)
             hxx, hxy, hyy = table.hessian(px[i], py[i])
-            A = local_curvature(s[PHI, i], s[THETA_DOT, i], s[PHI_DOT, i], acc1[i], acc2[i], sigma, R, hx[i], hy[i],
-                                hxx, hxy, hyy)
+            A = local_curvature(np.cos(s[PHI, i]), np.sin(s[PHI, i]), s[THETA_DOT, i], s[PHI_DOT, i], acc1[i],
+                                acc2[i], sigma, R, hx[i], hy[i], hxx, hxy, hyy)
             step[i] = np.maximum(step[i], curvature_step(g[i], gd[i], A + jump * V2[i], M[i], K[i], delta))
     return g, gd, step
 
@@ -84,8 +85,9 @@ def first_impact(s0, acc1, acc2, horizon, params, table, settings):
         st = flow(s0[:, act], a1, a2, ta, params.R) if ta.any() else s0[:, act]
         V2, A, J = motion_bounds(st[THETA_DOT], W_end[act], st[PHI_DOT], w_end[act], a1, a2, params.R)
         M, K = curvature_bounds(V2, A, J, table.grad_bound, table.hessian_bound, D3)
-        gf, gdf, step_f = end_step(st, 1.0, a1, a2, params, table, M, K, V2, delta, third, jump)
-        gb, gdb, step_b = end_step(st, -1.0, a1, a2, params, table, M, K, V2, delta, third, jump)
+        rem = horizon[act] - ta
+        gf, gdf, step_f = end_step(st, 1.0, a1, a2, params, table, M, K, V2, delta, third, jump, rem)
+        gb, gdb, step_b = end_step(st, -1.0, a1, a2, params, table, M, K, V2, delta, third, jump, rem)
         hit_f = (gf >= -delta) & (gdf > 0.0)
         hit_b = (gb >= -delta) & (gdb > 0.0)
         hit = hit_f | hit_b

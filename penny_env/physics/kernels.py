@@ -123,9 +123,8 @@ def acceleration_bound(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, grad_bound, hessia
     return hessian_bound * V2 + grad_bound * A
 
 
-def local_curvature(ph, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, xp=np):
-    """g''(t) = p'^T H p' + grad h . p'' at the current state, exactly."""
-    c, sn = xp.cos(ph), xp.sin(ph)
+def local_curvature(c, sn, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, xp=np):
+    """g''(t) = p'^T H p' + grad h . p'' at the current state (c, sn: cos, sin of the heading), exactly."""
     vx = R * (W * c - sigma * w * sn)
     vy = R * (W * sn + sigma * w * c)
     ar = acc2 - sigma * w * w
@@ -178,6 +177,12 @@ def safe_step(g, gd, M, xp=np):
 def search_step(g, gd, M, delta, xp=np):
     """Certified step for one end: the largest tau with g + gd tau + M tau^2 / 2 <= delta.
     Allowing a penetration of delta (a few ulps of the table) makes every step positive."""
+    if xp is SCALAR:  # safe_step(g - delta, ...) inlined: this is the scalar search's innermost call
+        r = -min(g - delta, 0.0)
+        disc = gd * gd + 2.0 * M * r
+        if gd > 0.0:
+            return 2.0 * r / (gd + math.sqrt(disc)) if disc >= 0.0 else math.inf
+        return (math.sqrt(disc) - gd) / M if M > 0.0 else math.inf
     return safe_step(g - delta, gd, M, xp)
 
 

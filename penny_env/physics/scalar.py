@@ -56,18 +56,55 @@ def wall1(s, sigma, R, table):
     return table.h(px, py), hx * vx + hy * vy
 
 
-def end_step1(s, sigma, acc1, acc2, R, table, M, K, V2, delta, third, jump):
-    """(g, g', certified step) of one end (see events.end_step)."""
-    px, py, vx, vy = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
-    hx, hy = table.grad(px, py)
-    g = table.h(px, py)
-    gd = hx * vx + hy * vy
-    step = search_step(g, gd, M, delta, SCALAR)
-    if third and (gd <= 0.0 or gd * gd < 2.0 * M * abs(g)):
-        hxx, hxy, hyy = table.hessian(px, py)
-        A = local_curvature(s[3], s[4], s[5], acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, SCALAR)
+def table_terms(table):
+    """(x, y) -> (h, hx, hy) and (x, y) -> Hessian for floats: the built-in tables' formulas inlined
+    (the same expressions as their methods, so the same values), any other table through its methods."""
+    from .tables import Circle, Ellipse, Stadium
+
+    if type(table) in (Ellipse, Circle):
+        ia2, ib2, hc = table._ia2, table._ib2, table._half_c
+        c2 = 2.0 * hc
+        hess = (c2 * ia2, 0.0, c2 * ib2)
+
+        def terms(x, y):
+            return (x * x * ia2 + y * y * ib2 - 1.0) * hc, c2 * x * ia2, c2 * y * ib2
+        return terms, lambda x, y: hess
+    if type(table) is Stadium:
+        half, r = table._half, table.radius
+        r2, two_r, inv = r ** 2, 2.0 * r, 1.0 / r
+
+        def terms(x, y):
+            dx = x - min(max(x, -half), half)
+            return (dx * dx + y * y - r2) / two_r, dx / r, y / r
+
+        def hess(x, y):
+            return (inv if x - min(max(x, -half), half) != 0.0 else 0.0), 0.0, inv
+        return terms, hess
+
+    def terms(x, y):
+        hx, hy = table.grad(x, y)
+        return table.h(x, y), hx, hy
+    return terms, getattr(table, "hessian", None)
+
+
+def end_plain1(x, y, c, sn, W, w, sigma, R, terms, M, delta):
+    """(g, g', plain certified step, end position, gradient) of one end (see events.end_step);
+    c, sn = cos, sin of the heading."""
+    sR = sigma * R
+    px, py = x + sR * c, y + sR * sn
+    g, hx, hy = terms(px, py)
+    gd = hx * (R * W * c - sR * w * sn) + hy * (R * W * sn + sR * w * c)
+    return g, gd, search_step(g, gd, M, delta, SCALAR), px, py, hx, hy
+
+
+def with_curvature1(end, c, sn, W, w, sigma, acc1, acc2, R, hess, M, K, V2, delta, jump, rem):
+    """The end's step, improved by the curvature step where that can help (see events.end_step)."""
+    g, gd, step, px, py, hx, hy = end
+    if step < rem and (gd <= 0.0 or gd * gd < 2.0 * M * abs(g)):
+        hxx, hxy, hyy = hess(px, py)
+        A = local_curvature(c, sn, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, SCALAR)
         step = max(step, curvature_step(g, gd, A + jump * V2, M, K, delta, SCALAR))
-    return g, gd, step
+    return step
 
 
 def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
@@ -78,19 +115,38 @@ def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
     w_end = s0[5] + acc1 * horizon
     G, L = table.grad_bound, table.hessian_bound
     third, D3, jump = third_order(table)
+    terms, hess = table_terms(table)
     t = 0.0
-    for _ in range(settings.max_search_steps):
-        st = flow1(s0, acc1, acc2, t, R) if t != 0.0 else s0
-        V2, A, J = motion_bounds(st[4], W_end, st[5], w_end, acc1, acc2, R, SCALAR)
+    free = acc1 == 0.0 and acc2 == 0.0  # constant angular velocities: the bounds never change
+    if free:
+        V2, A, J = motion_bounds(s0[4], W_end, s0[5], w_end, acc1, acc2, R, SCALAR)
         M, K = curvature_bounds(V2, A, J, G, L, D3, SCALAR)
-        gf, gdf, step_f = end_step1(st, 1.0, acc1, acc2, R, table, M, K, V2, delta, third, jump)
-        gb, gdb, step_b = end_step1(st, -1.0, acc1, acc2, R, table, M, K, V2, delta, third, jump)
+    for _ in range(settings.max_search_steps):
+        x, y, _, ph, W, w = st = flow1(s0, acc1, acc2, t, R) if t != 0.0 else s0
+        c, sn = math.cos(ph), math.sin(ph)
+        if not free:
+            V2, A, J = motion_bounds(W, W_end, w, w_end, acc1, acc2, R, SCALAR)
+            M, K = curvature_bounds(V2, A, J, G, L, D3, SCALAR)
+        ef = end_plain1(x, y, c, sn, W, w, 1.0, R, terms, M, delta)
+        eb = end_plain1(x, y, c, sn, W, w, -1.0, R, terms, M, delta)
+        gf, gdf, step_f = ef[:3]
+        gb, gdb, step_b = eb[:3]
         hit_f = gf >= -delta and gdf > 0.0
         hit_b = gb >= -delta and gdb > 0.0
         if hit_f or hit_b:
             front = hit_f and (not hit_b or gdf >= gdb)
             g, gd = (gf, gdf) if front else (gb, gdb)
             return min(max(t + newton_polish(g, gd, M, delta, SCALAR), 0.0), horizon), (1 if front else -1)
+        if third:
+            # tau = min over ends of max(plain, curvature step): the other end's curvature step only
+            # matters when the first end's step exceeds the other's plain step (same tau as events.py)
+            rem = horizon - t
+            (e1, sg1), (e2, sg2) = ((ef, 1.0), (eb, -1.0)) if step_f <= step_b else ((eb, -1.0), (ef, 1.0))
+            s1 = with_curvature1(e1, c, sn, W, w, sg1, acc1, acc2, R, hess, M, K, V2, delta, jump, rem)
+            s2 = e2[2]
+            if s1 > s2:
+                s2 = with_curvature1(e2, c, sn, W, w, sg2, acc1, acc2, R, hess, M, K, V2, delta, jump, rem)
+            step_f, step_b = s1, s2
         t = t + min(step_f, step_b)
         if not t < horizon:
             return math.inf, 0
