@@ -122,3 +122,6 @@ def test_stability_quick(tmp_path):
         for r in rs:
             assert isinstance(r["passed"], bool) and "measured" in r
             assert "no result within" not in " ".join(r["reasons"])
+            # the small versions of every case keep the invariants: finite, inside, energy as the law says
+            assert r["passed"], (name, r["label"], r["reasons"])
+            assert r["measured"].get("finite", True) is True, (name, r["label"])
