@@ -89,9 +89,20 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     check_inside(S, params, tab, "states")
     acc1, acc2 = _controls(controls, n, params)
     h = _times(horizon, n, "horizon")
-    t_hit, end = _first_impact(S, np.ascontiguousarray(acc1), np.ascontiguousarray(acc2), h, params, tab,
-                               settings or SolverSettings())
-    # a search stopped on its step budget (end 2) is not an impact found
+    settings = settings or SolverSettings()
+    acc1, acc2 = np.ascontiguousarray(acc1), np.ascontiguousarray(acc2)
+    t_hit, end = _first_impact(S, acc1, acc2, h, params, tab, settings)
+    # a search that spent its step budget (end 2) resumes from the time it certified, a bounded number of times
+    start = np.zeros(n)
+    for _ in range(64):
+        open_ = np.flatnonzero(end == 2)
+        if open_.size == 0:
+            break
+        start[open_] += t_hit[open_]
+        S_open = _flow(S[:, open_], acc1[open_], acc2[open_], start[open_], params.R)
+        t2, e2 = _first_impact(S_open, acc1[open_], acc2[open_], h[open_] - start[open_], params, tab, settings)
+        t_hit[open_], end[open_] = t2, e2
+    t_hit = np.where(end == 0, np.inf, start + t_hit)
     return np.where(end == 2, np.inf, t_hit), np.where(end == 2, 0, end).astype(np.int8)
 
 

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+import penny_env as pe
 import penny_env.batch as pb
 from penny_env.physics import PennyParams, simulate
 
@@ -67,3 +68,16 @@ def test_errors_name_field_and_row():
         pb.simulate(STATES, table={"kind": "hexagon"}, t_final=1.0)
     with pytest.raises(ValueError, match="horizon"):
         pb.simulate(STATES, table=CIRCLE, t_final=2.0, controls=np.zeros((3, 2)), control_dt=0.05)
+
+
+def test_first_impact_resumes_after_its_step_budget():
+    # a search cut short by max_search_steps resumes from the time it certified: same impacts
+    from penny_env import batch
+    rng = np.random.default_rng(5)
+    table = pe.Ellipse(0.15, 0.2)
+    S = np.array([[rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), 0, rng.uniform(0, 6), rng.uniform(5, 20),
+                   rng.uniform(-0.5, 0.5)] for _ in range(12)])
+    t0, e0 = batch.first_impact(S, [0.0, 0.0], 60.0, table=table)
+    t1, e1 = batch.first_impact(S, [0.0, 0.0], 60.0, table=table, settings=pe.SolverSettings(max_search_steps=2))
+    assert np.array_equal(e0, e1) and np.isfinite(t0).sum() >= 6
+    np.testing.assert_allclose(t1, t0, rtol=1e-12)

@@ -29,21 +29,11 @@ import numpy as np
 import gymnasium as gym
 
 import penny_env  # noqa: F401  (registers the ids)
+from penny_env.analysis.common import cpu_model
 from penny_env.envs.registration import env_ids
 
 WALLED = "PennyImpacts-Stadium-v0"
 VECTOR_PRESETS = ("PennyReach-Ellipse-v0", "PennyImpacts-Stadium-v0", "PennyReach-Plane-v0", "PennyDrive-Circle-v0")
-
-
-def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def single_step_us(env_id: str, steps: int, seed: int = 0) -> tuple[float, float]:
@@ -114,7 +104,7 @@ def main(argv: list[str] | None = None) -> str:
     quick = args.quick
     single_steps = 1000 if quick else 20_000
     lines = ["# Throughput of penny_env", "",
-             f"- machine: {platform.platform()}, CPU: {_cpu()} ({os.cpu_count()} logical cores)",
+             f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
              f"- Python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
              f"- command: `python -m penny_env.analysis.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",

@@ -168,7 +168,8 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
 
     The law's formula is applied as a map on the impact surface whatever the sign of the
     normal velocity (the simulator only calls it for ends moving outward). For the plastic law
-    an end left moving outward (I > m R^2) gets its normal velocity removed."""
+    an end left moving outward (possible when I > m R^2 or J > m R^2, see laws.py) gets its
+    normal velocity removed."""
     params = check_params(params)
     if table is None:
         raise ValueError("table is required for impact_map")
