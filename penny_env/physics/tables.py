@@ -300,11 +300,69 @@ class ConvexTable(Table):
         return np.stack([cx + lo * np.cos(ang), cy + lo * np.sin(ang)], axis=1)
 
 
+PROTOCOL = ("h", "grad", "grad_bound", "hessian_bound", "inradius", "extent")
+
+
+class ProtocolTable(Table):
+    """A user object that follows the table protocol (module docstring), seen as a Table: its
+    methods are delegated, its numbers checked, and the length scale derived from its extent."""
+
+    def __init__(self, obj):
+        missing = [k for k in PROTOCOL if not hasattr(obj, k)]
+        if missing:
+            raise TypeError(f"table: {type(obj).__name__} lacks {missing} of the table protocol {PROTOCOL}")
+        self._obj = obj
+        self.name = getattr(obj, "name", type(obj).__name__)
+        self.grad_bound = _length("table", "grad_bound", obj.grad_bound)
+        self.hessian_bound = _length("table", "hessian_bound", obj.hessian_bound, allow_zero=True)
+        self.inradius = _length("table", "inradius", obj.inradius)
+        try:
+            ext = tuple(float(v) for v in obj.extent)
+        except (TypeError, ValueError):
+            raise TypeError("table.extent must be (xmin, xmax, ymin, ymax)") from None
+        if len(ext) != 4 or not all(map(math.isfinite, ext)) or ext[0] >= ext[1] or ext[2] >= ext[3]:
+            raise ValueError(f"table.extent must be finite (xmin, xmax, ymin, ymax) with min < max, got {obj.extent!r}")
+        self.extent = ext
+        if callable(getattr(obj, "hessian", None)):
+            self.hessian = obj.hessian
+            self.third_derivative_bound = _length("table", "third_derivative_bound",
+                                                  getattr(obj, "third_derivative_bound", 0.0), allow_zero=True)
+            self.hessian_jump = _length("table", "hessian_jump", getattr(obj, "hessian_jump", 0.0), allow_zero=True)
+
+    def _fields(self):
+        return {"obj": self._obj}
+
+    def h(self, x, y):
+        return self._obj.h(x, y)
+
+    def grad(self, x, y):
+        return self._obj.grad(x, y)
+
+    def boundary(self, n: int = 256) -> np.ndarray:
+        if hasattr(self._obj, "boundary"):
+            return self._obj.boundary(n)
+        return ConvexTable.boundary(self, n)
+
+    _h = property(lambda self: self._obj.h)
+
+
+def as_table(table) -> Table | None:
+    """None, a Table, or any object following the table protocol (wrapped in ProtocolTable)."""
+    if table is None or isinstance(table, Table):
+        return table
+    if isinstance(table, (dict, str, int, float)):
+        raise TypeError(f"table must be a penny_env table (Ellipse, Circle, Stadium, ConvexTable), an object "
+                        f"following the table protocol, or None; got {type(table).__name__}")
+    return ProtocolTable(table)
+
+
 def make_table(spec) -> Table | None:
-    """A table from a spec: a Table, None (open plane), or a dict such as
-    {"kind": "ellipse", "a": 0.15, "b": 0.2}; kinds: ellipse, circle, stadium, none."""
+    """A table from a spec: a Table, an object following the table protocol, None (open plane), or
+    a dict such as {"kind": "ellipse", "a": 0.15, "b": 0.2}; kinds: ellipse, circle, stadium, none."""
     if spec is None or isinstance(spec, Table):
         return spec
+    if not isinstance(spec, dict) and all(hasattr(spec, k) for k in PROTOCOL):
+        return ProtocolTable(spec)
     if not isinstance(spec, dict):
         raise TypeError(f"table must be a Table, None or a dict, got {type(spec).__name__}")
     spec = dict(spec)

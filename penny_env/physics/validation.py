@@ -5,7 +5,7 @@ import numpy as np
 
 from .flow import end_kinematics
 from .params import PennyParams
-from .tables import Table
+from .tables import as_table
 
 STATE_FIELDS = ("x", "y", "theta", "phi", "theta_dot", "phi_dot")
 
@@ -49,10 +49,9 @@ def check_params(params) -> PennyParams:
 
 
 def check_table(table, params: PennyParams):
+    table = as_table(table)
     if table is None:
         return None
-    if not isinstance(table, Table) and not all(hasattr(table, k) for k in ("h", "grad", "grad_bound", "hessian_bound", "inradius", "extent")):
-        raise TypeError(f"table must be a penny_env table (Ellipse, Circle, Stadium, ConvexTable) or None, got {type(table).__name__}")
     if not table.inradius > params.R:
         raise ValueError(f"table: too small for the penny, its inradius {table.inradius:.6g} m is not larger than R = {params.R:.6g} m")
     return table
