@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-import penny_env as pe
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 settings.register_profile("ci", deadline=None, max_examples=60, derandomize=True)

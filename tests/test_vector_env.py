@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-import penny_env
 from penny_env import PennyEnv, PennyVectorEnv
 from penny_env.envs.registration import env_presets
 

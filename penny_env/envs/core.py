@@ -9,14 +9,13 @@ array operation (no per-env generator objects in the step path).
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from ..physics import SolverSettings, advance, flow
 from .fast_path import ScalarPhysics, certified_free
 from .scene import Scene, Task, ConfigError
-from .tasks import TaskConstants, IMPACTS
+from .tasks import TaskConstants
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 

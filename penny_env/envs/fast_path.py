@@ -23,32 +23,9 @@ import math
 import numpy as np
 
 from ..physics.kernels import SCALAR, acceleration_bound, search_step
-from ..physics.scalar import advance1, flow1
-from ..physics.tables import Circle, Ellipse, Stadium
+from ..physics.scalar import advance1, flow1, table_terms
 
 _INF = math.inf
-
-
-def _h_grad_function(table):
-    """(x, y) -> (h, hx, hy) for floats: the built-in tables inlined, others through their methods."""
-    if type(table) in (Ellipse, Circle):
-        ia2, ib2, hc = table._ia2, table._ib2, table._half_c
-        c2 = 2.0 * hc
-
-        def hg(x, y):
-            return (x * x * ia2 + y * y * ib2 - 1.0) * hc, c2 * x * ia2, c2 * y * ib2
-    elif type(table) is Stadium:
-        half, r = table._half, table.radius
-        r2, two_r = r ** 2, 2.0 * r
-
-        def hg(x, y):
-            dx = x - min(max(x, -half), half)
-            return (dx * dx + y * y - r2) / two_r, dx / r, y / r
-    else:
-        def hg(x, y):
-            hx, hy = table.grad(x, y)
-            return table.h(x, y), hx, hy
-    return hg
 
 
 class ScalarPhysics:
@@ -62,7 +39,7 @@ class ScalarPhysics:
         self.params, self.table, self.law, self.settings = params, table, law, settings
         self.R = params.R
         if table is not None:
-            self.hg = _h_grad_function(table)
+            self.hg = table_terms(table)[0]
             self.delta = settings.contact_tol * table.size
             self.G, self.L = table.grad_bound, table.hessian_bound
 

@@ -127,7 +127,6 @@ class PennyVectorEnv(VectorEnv):
                     self._keys[i] = seed_keys([s])[0]
                 self._episodes[i] = 0
         if self._S is None:
-            c = self._core
             self._S = np.zeros((6, n))
             self._target = np.zeros((2, n))
             self._arc = np.zeros((2, n))

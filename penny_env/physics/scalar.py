@@ -122,7 +122,7 @@ def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
         V2, A, J = motion_bounds(s0[4], W_end, s0[5], w_end, acc1, acc2, R, SCALAR)
         M, K = curvature_bounds(V2, A, J, G, L, D3, SCALAR)
     for _ in range(settings.max_search_steps):
-        x, y, _, ph, W, w = st = flow1(s0, acc1, acc2, t, R) if t != 0.0 else s0
+        x, y, _, ph, W, w = flow1(s0, acc1, acc2, t, R) if t != 0.0 else s0
         c, sn = math.cos(ph), math.sin(ph)
         if not free:
             V2, A, J = motion_bounds(W, W_end, w, w_end, acc1, acc2, R, SCALAR)

@@ -8,7 +8,7 @@ import numpy as np
 
 from .advance import relocate_inside
 from .scalar import advance1, flow1
-from .flow import PHI_DOT, THETA_DOT, flow, end_kinematics, kinetic_energy
+from .flow import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_table,

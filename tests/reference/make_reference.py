@@ -129,7 +129,6 @@ import json
 import math
 import os
 import random
-import sys
 import time
 
 import mpmath
