@@ -102,7 +102,7 @@ def test_open_plane_never_searches(monkeypatch):
     calls = []
     monkeypatch.setattr(core, "advance", lambda *a, **k: calls.append(1))
     monkeypatch.setattr(fast_path.ScalarPhysics, "certified_free", lambda *a, **k: calls.append(1))
-    monkeypatch.setattr(fast_path, "advance1", lambda *a, **k: calls.append(1))
+    monkeypatch.setattr(fast_path, "advance_m", lambda *a, **k: calls.append(1))
     monkeypatch.setattr(core, "certified_free", lambda *a, **k: calls.append(1))
     env = gym.make("PennyReach-Plane-v0")
     env.reset(seed=0)

@@ -18,48 +18,27 @@ tests/test_fast_path.py checks all of this bitwise on random states.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from ..physics.kernels import SCALAR, acceleration_bound, search_step
-from ..physics.scalar import advance1, flow1, table_terms
-
-_INF = math.inf
+from ..physics.kernels import acceleration_bound, search_step
+from ..physics.scalar import advance_m, certified_free1, flow1, scalar_model
 
 
 class ScalarPhysics:
     """advance() for one penny with Python floats.
 
-    A period that the certificate (:func:`certified_free1`) shows to be free of impacts is one
-    :func:`flow1` (what advance() returns then); any other period goes through the physics' own
-    scalar event loop, physics.scalar.advance1 (bitwise equal to the batched advance())."""
+    A period that the certificate (physics.scalar.certified_free1) shows to be free of impacts is
+    one :func:`flow1` (what advance() returns then); any other period goes through the physics' own
+    scalar event loop, physics.scalar.advance_m (bitwise equal to the batched advance())."""
 
     def __init__(self, params, table, law, settings):
         self.params, self.table, self.law, self.settings = params, table, law, settings
         self.R = params.R
-        if table is not None:
-            self.hg = table_terms(table)[0]
-            self.delta = settings.contact_tol * table.size
-            self.G, self.L = table.grad_bound, table.hessian_bound
+        self.model, self.terms, self.hess = scalar_model(params, table, law, settings)
 
     def certified_free(self, s, acc1, acc2, dt):
         """:func:`certified_free` for one penny (the same kernels, for floats)."""
-        R = self.R
-        delta = self.delta
-        x, y, _, ph, W, w = s
-        c, sn = math.cos(ph), math.sin(ph)
-        M = acceleration_bound(W, W + acc2 * dt, w, w + acc1 * dt, acc1, acc2, R, self.G, self.L, SCALAR)
-        RW = R * W
-        tau = _INF
-        for sR in (R, -R):
-            g, hx, hy = self.hg(x + sR * c, y + sR * sn)
-            sRw = sR * w
-            gd = hx * (RW * c - sRw * sn) + hy * (RW * sn + sRw * c)
-            if g >= -delta and gd > 0.0:
-                return False
-            tau = min(tau, search_step(g, gd, M, delta, SCALAR))
-        return not tau < dt
+        return certified_free1(s, acc1, acc2, dt, self.model, self.terms)
 
     def advance(self, s, acc1, acc2, dt):
         """(new_state, impacts, rests) over one interval (advance.advance for one penny): impacts a
@@ -68,7 +47,7 @@ class ScalarPhysics:
             return flow1(s, acc1, acc2, dt, self.R), (), ()
         if self.certified_free(s, acc1, acc2, dt):
             return flow1(s, acc1, acc2, dt, self.R), (), ()
-        s, impacts, rests, _ = advance1(s, acc1, acc2, dt, self.params, self.table, self.law, self.settings)
+        s, impacts, rests, _ = advance_m(s, acc1, acc2, dt, self.model, self.terms, self.hess, 0)
         return s, impacts, rests
 
 

@@ -36,6 +36,13 @@ RULES = tuple((limit, tuple((0.5 * (x + 1.0)).tolist()), tuple((0.5 * wt).tolist
               for limit, (x, wt) in ((0.5, np.polynomial.legendre.leggauss(8)),
                                      (1.5, np.polynomial.legendre.leggauss(10)),
                                      (MAX_PHASE_PER_PANEL, np.polynomial.legendre.leggauss(12))))
+# The same rules as equal-length tuples (zero-padded) with their node counts: the form the scalar
+# loop (scalar.displacement1) indexes, in plain Python and compiled alike.
+RULE_LIMITS = tuple(r[0] for r in RULES)
+RULE_COUNTS = tuple(len(r[1]) for r in RULES)
+_PAD = max(RULE_COUNTS)
+RULE_NODES = tuple(r[1] + (0.0,) * (_PAD - len(r[1])) for r in RULES)
+RULE_WEIGHTS = tuple(r[2] + (0.0,) * (_PAD - len(r[2])) for r in RULES)
 
 
 def phase_sweep(w, acc1, t, xp=np):

@@ -1,7 +1,7 @@
 """The penny's formulas, written once for numpy arrays and for Python floats.
 
-Every kernel takes the math namespace ``xp`` last: ``numpy`` for batches (elementwise over
-(N,) arrays) or :data:`SCALAR` for one penny in plain floats (what the single environment and
+Every kernel takes the math namespace ``xp`` last: :data:`ARRAY` (numpy) for batches (elementwise
+over (N,) arrays) or :data:`SCALAR` for one penny in plain floats (what the single environment and
 simulate() run: numpy on size-1 arrays costs ~1 us per call). Both evaluate the same IEEE
 operations in the same order, so batched and scalar results agree bitwise on a given machine.
 Branches are written as ``xp.where`` over expressions that are finite in both branches.
@@ -9,27 +9,32 @@ Branches are written as ``xp.where`` over expressions that are finite in both br
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 
 
-class _ScalarMath:
-    """The subset of numpy used by the kernels, for Python floats."""
+def math_namespace(name, scalar, **functions):
+    """A module object holding the math functions the kernels call as ``xp.<name>``.
 
-    sin = staticmethod(math.sin)
-    cos = staticmethod(math.cos)
-    sqrt = staticmethod(math.sqrt)
-    abs = staticmethod(abs)
-    minimum = staticmethod(min)
-    maximum = staticmethod(max)
-    inf = math.inf
-
-    @staticmethod
-    def where(cond, a, b):
-        return a if cond else b
+    ``scalar`` tells a kernel whether it runs on one penny (plain floats: take the branch, skip
+    the other) or on arrays (evaluate both branches, select with ``xp.where``). A module, not a
+    class instance, so numba can compile the kernels with such a namespace (physics/compiled.py)."""
+    ns = types.ModuleType(name)
+    ns.scalar = scalar
+    for key, value in functions.items():
+        setattr(ns, key, value)
+    return ns
 
 
-SCALAR = _ScalarMath()
+def _where(cond, a, b):
+    return a if cond else b
+
+
+ARRAY = math_namespace("penny_env_array_math", False, sin=np.sin, cos=np.cos, sqrt=np.sqrt, abs=np.abs,
+                       minimum=np.minimum, maximum=np.maximum, where=np.where, inf=np.inf)
+SCALAR = math_namespace("penny_env_scalar_math", True, sin=math.sin, cos=math.cos, sqrt=math.sqrt, abs=abs,
+                        minimum=min, maximum=max, where=_where, inf=math.inf)
 
 # j1(x) = sum_k (-1)^k (2k+2) x^(2k+1) / (2k+3)!, truncated where terms drop below 1e-19 for |x| < 1
 _J1_COEFFS = []
@@ -40,9 +45,9 @@ for _k in range(10):
 _J1_REVERSED = tuple(_J1_COEFFS[::-1])
 
 
-def sinc_kernels(x, xp=np):
+def sinc_kernels(x, xp=ARRAY):
     """j0(x) = sin(x)/x and j1(x) = (sin x - x cos x)/x^2, accurate to round-off for all x."""
-    if xp is SCALAR:  # the same formulas, evaluating only the branch taken
+    if xp.scalar:  # the same formulas, evaluating only the branch taken
         sn, cs = math.sin(x), math.cos(x)
         if abs(x) < 1.0:
             x2 = x * x
@@ -71,7 +76,7 @@ def angles_at(th, ph, W, w, acc1, acc2, t):
     return th + t * (W + 0.5 * acc2 * t), ph + t * (w + 0.5 * acc1 * t), W + acc2 * t, w + acc1 * t
 
 
-def displacement_closed(W, w, ph, acc2, t, R, xp=np):
+def displacement_closed(W, w, ph, acc2, t, R, xp=ARRAY):
     """Contact-point displacement over [0, t] without steering torque (acc1 = 0), exact:
     z(t) - z0 = R t e^{i(phi0 + x)} [theta_dot0 j0 + acc2 t (j0 + i j1) / 2], x = phi_dot0 t / 2."""
     half = 0.5 * w * t
@@ -85,14 +90,14 @@ def displacement_closed(W, w, ph, acc2, t, R, xp=np):
     return Rt * (cm * br - sm * bi), Rt * (sm * br + cm * bi)
 
 
-def end_point(x, y, ph, W, w, sigma, R, xp=np):
+def end_point(x, y, ph, W, w, sigma, R, xp=ARRAY):
     """Position and velocity of an end (sigma = +1 front, -1 back)."""
     c, sn = xp.cos(ph), xp.sin(ph)
     sR = sigma * R
     return x + sR * c, y + sR * sn, R * W * c - sR * w * sn, R * W * sn + sR * w * c
 
 
-def motion_bounds(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, xp=np):
+def motion_bounds(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, xp=ARRAY):
     """Bounds (V^2, A, J) on |p'|^2, |p''| and |p'''| of an end p over an interval, from the
     end-point angular speeds (theta_dot and phi_dot are linear in time, so extremes are at the
     ends). With s = +-1 the end, p' = R e^{i phi} (W + i s w),
@@ -109,7 +114,7 @@ def motion_bounds(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, xp=np):
             R * xp.sqrt(j_par * j_par + j_perp * j_perp))
 
 
-def curvature_bounds(V2, A, J, grad_bound, hessian_bound, third_bound, xp=np):
+def curvature_bounds(V2, A, J, grad_bound, hessian_bound, third_bound, xp=ARRAY):
     """M >= g'' = p'^T H p' + grad h . p'' and K >= |g'''| (between Hessian jumps), g = h(p(t))."""
     V = xp.sqrt(V2)
     M = hessian_bound * V2 + grad_bound * A
@@ -117,13 +122,13 @@ def curvature_bounds(V2, A, J, grad_bound, hessian_bound, third_bound, xp=np):
     return M, K
 
 
-def acceleration_bound(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, grad_bound, hessian_bound, xp=np):
+def acceleration_bound(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, grad_bound, hessian_bound, xp=ARRAY):
     """M >= g'' over an interval (see motion_bounds)."""
     V2, A, _ = motion_bounds(W_lo, W_hi, w_lo, w_hi, acc1, acc2, R, xp)
     return hessian_bound * V2 + grad_bound * A
 
 
-def local_curvature(c, sn, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, xp=np):
+def local_curvature(c, sn, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, xp=ARRAY):
     """g''(t) = p'^T H p' + grad h . p'' at the current state (c, sn: cos, sin of the heading), exactly."""
     vx = R * (W * c - sigma * w * sn)
     vy = R * (W * sn + sigma * w * c)
@@ -134,7 +139,7 @@ def local_curvature(c, sn, W, w, acc1, acc2, sigma, R, hx, hy, hxx, hxy, hyy, xp
     return hxx * vx * vx + 2.0 * hxy * vx * vy + hyy * vy * vy + hx * ax + hy * ay
 
 
-def curvature_step(g, gd, A, M, K, delta, xp=np):
+def curvature_step(g, gd, A, M, K, delta, xp=ARRAY):
     """Certified step from the local curvature A >= g''(t) (Hessian-jump allowance included) and
     |d^3 g/dt^3| <= K. By Taylor, g(t + s) <= g + gd s + (A + K tau / 3) s^2 / 2 for s <= tau, so
     two windows are certified: tau = 3 (M - A) / (2 K) with curvature (A + M) / 2, and, when the end
@@ -142,7 +147,7 @@ def curvature_step(g, gd, A, M, K, delta, xp=np):
     tangency the second one turns the geometric shrinking of the global-bound steps into
     Newton-like steps from below."""
     gap = xp.maximum(M - A, 0.0)
-    if xp is SCALAR:
+    if xp.scalar:
         if not K > 0.0:
             return search_step(g, gd, A, delta, xp)  # g'' is constant
         step = min(search_step(g, gd, 0.5 * (A + M), delta, xp), 1.5 * gap / K)
@@ -157,12 +162,12 @@ def curvature_step(g, gd, A, M, K, delta, xp=np):
     return xp.where(pos, step, search_step(g, gd, A, delta, xp))
 
 
-def safe_step(g, gd, M, xp=np):
+def safe_step(g, gd, M, xp=ARRAY):
     """Largest tau such that g + gd s + M s^2 / 2 <= 0 for all s in [0, tau] (g clamped to <= 0);
     inf when the bound never reaches 0. M may be negative (a concave bound)."""
     r = -xp.minimum(g, 0.0)
     disc = gd * gd + 2.0 * M * r
-    if xp is SCALAR:
+    if xp.scalar:
         if gd > 0.0:
             return 2.0 * r / (gd + math.sqrt(disc)) if disc >= 0.0 else math.inf
         return (math.sqrt(disc) - gd) / M if M > 0.0 else math.inf
@@ -174,10 +179,10 @@ def safe_step(g, gd, M, xp=np):
     return xp.where(rising, towards, away)
 
 
-def search_step(g, gd, M, delta, xp=np):
+def search_step(g, gd, M, delta, xp=ARRAY):
     """Certified step for one end: the largest tau with g + gd tau + M tau^2 / 2 <= delta.
     Allowing a penetration of delta (a few ulps of the table) makes every step positive."""
-    if xp is SCALAR:  # safe_step(g - delta, ...) inlined: this is the scalar search's innermost call
+    if xp.scalar:  # safe_step(g - delta, ...) inlined: this is the scalar search's innermost call
         r = -min(g - delta, 0.0)
         disc = gd * gd + 2.0 * M * r
         if gd > 0.0:
@@ -186,22 +191,22 @@ def search_step(g, gd, M, delta, xp=np):
     return safe_step(g - delta, gd, M, xp)
 
 
-def time_resolution(delta, M, xp=np):
+def time_resolution(delta, M, xp=ARRAY):
     """sqrt(2 delta / M): the time over which the search cannot tell a graze of depth delta from
     a touch. Impacts closer together than a few of these are an accumulation (Zeno)."""
-    if xp is SCALAR:
+    if xp.scalar:
         return math.sqrt(2.0 * delta / M) if M > 0.0 else math.inf
     return xp.where(M > 0.0, xp.sqrt(2.0 * delta / xp.where(M > 0.0, M, 1.0)), xp.inf)
 
 
-def newton_polish(g, gd, M, delta, xp=np):
+def newton_polish(g, gd, M, delta, xp=ARRAY):
     """Newton correction -g/gd (gd > 0) of a time where the end is within delta of the wall,
     limited to sqrt(2 delta / M), the time over which the curvature can matter at that depth."""
     cap = time_resolution(delta, M, xp)
     return xp.minimum(xp.maximum(-g / gd, -cap), cap)
 
 
-def law_update(W, w, a, b, grad2, e, plastic, Itot, J, m, xp=np):
+def law_update(W, w, a, b, grad2, e, plastic, Itot, J, m, xp=ARRAY):
     """Post-impact (theta_dot, phi_dot) for the normal form n = a W + b w (see laws.py).
 
     e: restitution coefficient (ignored when plastic). plastic: the paper's pi_Delta o P,
@@ -210,8 +215,10 @@ def law_update(W, w, a, b, grad2, e, plastic, Itot, J, m, xp=np):
     metric = a * a / Itot + b * b / J
     if plastic:
         k = 2.0 * vn / (grad2 / m + b * b / J)
-        k = xp.where((vn > 0.0) & (vn - k * metric > 0.0), vn / metric, k) if xp is np else (
-            vn / metric if (vn > 0.0 and vn - k * metric > 0.0) else k)
+        if xp.scalar:
+            k = vn / metric if (vn > 0.0 and vn - k * metric > 0.0) else k
+        else:
+            k = xp.where((vn > 0.0) & (vn - k * metric > 0.0), vn / metric, k)
     else:
         k = (1.0 + e) * vn / metric
     return W - k * a / Itot, w - k * b / J
