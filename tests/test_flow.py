@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from penny_env.physics.flow import flow
+from penny_env.physics.flow import RULE_LIMITS, flow
 from penny_env.physics.kernels import sinc_kernels
 
 R = 0.01
@@ -91,7 +91,7 @@ def test_velocity_is_on_the_distribution(seed, steer):
     np.testing.assert_allclose(v, expected, rtol=1e-6, atol=1e-9 * R * (1 + abs(pm[4, 1])))
 
 
-@pytest.mark.parametrize("limit", [0.5, 1.5, 3.0])
+@pytest.mark.parametrize("limit", RULE_LIMITS)
 @pytest.mark.parametrize("split", [1.0, 0.6, 0.2, 0.0])
 def test_quadrature_rules_reach_round_off_at_their_limits(limit, split):
     # phase sweep exactly at a rule's limit, shared between the linear (phi_dot) and quadratic (u1) parts

@@ -50,7 +50,7 @@ def uniforms(keys, episodes, n=N_DRAWS) -> np.ndarray:
 class Core:
     """Everything the environments compute, from (Scene, Task). Picklable (rebuilt from them)."""
 
-    def __init__(self, scene: Scene, task: Task, settings: SolverSettings | None = None):
+    def __init__(self, scene: Scene, task: Task, settings: SolverSettings | None = None, backend: str = "numpy"):
         self.scene, self.task = scene, task
         self.settings = settings if settings is not None else SolverSettings()
         self.params = scene.make_params()
@@ -81,12 +81,36 @@ class Core:
         self.f_spawn = scene.init["spawn_fraction"]
         self.f_target = task.target_fraction * fmax
         self.delta = 0.0 if self.plane else self.settings.contact_tol * self.table.size
+        self.backend = self._backend(backend)
+        self.compiled = None
+        if self.backend == "numba":
+            from ..physics.compiled import CompiledBatch
+            self.compiled = CompiledBatch(p, self.table, self.law, self.settings)
+
+    def _backend(self, backend):
+        """'numba' or 'numpy' for the batched step; 'auto' takes numba where it is installed and the
+        table compiles (the built-in tables and the open plane)."""
+        from ..physics import compiled
+        from ..physics.scalar import OTHER, scalar_model
+
+        if backend not in ("auto", "numpy", "numba"):
+            raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
+        compiles = self.plane or scalar_model(self.params, self.table, self.law, self.settings).kind != OTHER
+        if backend == "numba":
+            if not compiled.available():
+                raise ValueError("backend='numba' needs numba: pip install \"penny_env[fast]\"")
+            if not compiles:
+                raise ValueError(f"backend='numba': scene.table {type(self.table).__name__} does not compile "
+                                 "(only ellipse, circle, stadium and the open plane do); use backend='numpy'")
+        if backend == "auto":
+            return "numba" if compiled.available() and compiles else "numpy"
+        return backend
 
     def __getstate__(self):
-        return {"scene": self.scene, "task": self.task, "settings": self.settings}
+        return {"scene": self.scene, "task": self.task, "settings": self.settings, "backend": self.backend}
 
     def __setstate__(self, state):
-        self.__init__(state["scene"], state["task"], state["settings"])
+        self.__init__(state["scene"], state["task"], state["settings"], state.get("backend", "numpy"))
 
     # -- spaces --------------------------------------------------------------------------
     def obs_bounds(self):
@@ -166,10 +190,13 @@ class Core:
         if self.plane:
             np.tanh(o[0:2], out=o[0:2])
             np.tanh(o[8:10], out=o[8:10])
-        o[2] = np.cos(S[THETA])
-        o[3] = np.sin(S[THETA])
-        o[4] = np.cos(S[PHI])
-        o[5] = np.sin(S[PHI])
+        if self.compiled is not None:
+            o[2:6] = self.compiled.angle_trig(S)
+        else:
+            o[2] = np.cos(S[THETA])
+            o[3] = np.sin(S[THETA])
+            o[4] = np.cos(S[PHI])
+            o[5] = np.sin(S[PHI])
         o[6] = np.tanh(S[THETA_DOT] * self.s_W)
         o[7] = np.tanh(S[PHI_DOT] * self.s_w)
         if self.impacts:
@@ -187,7 +214,10 @@ class Core:
 
         The open plane is one closed-form (or quadrature) flow. With walls, the pennies whose first
         certified search step excludes an impact are flowed directly (what advance() would do),
-        the others go through physics.advance()."""
+        the others go through physics.advance(). The numba backend runs the physics' scalar loop,
+        compiled, over all pennies (physics/compiled.py): the same operations, penny by penny."""
+        if self.compiled is not None:
+            return self.compiled.advance(S, acc1, acc2, self.dt)
         if self.plane:
             return flow(S, acc1, acc2, self.dt, self.R), None
         free = certified_free(S, acc1, acc2, self.dt, self.params, self.table, self.settings)

@@ -34,11 +34,11 @@ class ScalarPhysics:
     def __init__(self, params, table, law, settings):
         self.params, self.table, self.law, self.settings = params, table, law, settings
         self.R = params.R
-        self.model, self.terms, self.hess = scalar_model(params, table, law, settings)
+        self.model = scalar_model(params, table, law, settings)
 
     def certified_free(self, s, acc1, acc2, dt):
         """:func:`certified_free` for one penny (the same kernels, for floats)."""
-        return certified_free1(s, acc1, acc2, dt, self.model, self.terms)
+        return certified_free1(s, acc1, acc2, dt, self.model)
 
     def advance(self, s, acc1, acc2, dt):
         """(new_state, impacts, rests) over one interval (advance.advance for one penny): impacts a
@@ -47,7 +47,7 @@ class ScalarPhysics:
             return flow1(s, acc1, acc2, dt, self.R), (), ()
         if self.certified_free(s, acc1, acc2, dt):
             return flow1(s, acc1, acc2, dt, self.R), (), ()
-        s, impacts, rests, _ = advance_m(s, acc1, acc2, dt, self.model, self.terms, self.hess, 0)
+        s, impacts, rests, _ = advance_m(s, acc1, acc2, dt, self.model, 0)
         return s, impacts, rests
 
 

@@ -28,7 +28,14 @@ class PennyVectorEnv(VectorEnv):
     seed + i under the same actions, episode after episode (bitwise in practice; tested to 1e-12).
 
     ``PennyVectorEnv(num_envs, scene="ellipse", task="reach", max_episode_steps=None,
-    autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, **overrides)``.
+    autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto", **overrides)``.
+
+    backend: "numba" runs the physics' own scalar event loop compiled and in parallel over the
+    pennies (physics/compiled.py; needs the optional numba, ``pip install "penny_env[fast]"``), "numpy"
+    the array event loop (physics.advance); "auto" (default) takes numba where it is installed and
+    the table compiles (ellipse, circle, stadium, open plane). Both give the single env's
+    trajectories (tested). The first numba step of a fresh install compiles for a few seconds;
+    later processes load the machine code from numba's cache.
 
     Autoreset: NEXT_STEP (default) - the step after an env's episode ended resets it (its
     obs is the reset obs, reward 0, terminated = truncated = False); SAME_STEP - the ending step
@@ -47,7 +54,7 @@ class PennyVectorEnv(VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP, "render_fps": 20}
 
     def __init__(self, num_envs: int = 1, scene="ellipse", task="reach", max_episode_steps=None,
-                 autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, **overrides):
+                 autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto", **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if max_episode_steps is not None:
@@ -59,6 +66,7 @@ class PennyVectorEnv(VectorEnv):
         if render_mode is not None and render_mode != "rgb_array":
             raise ValueError(f"PennyVectorEnv render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.num_envs = int(num_envs)
+        self.backend = backend
         self.render_mode = render_mode
         self.autoreset_mode = autoreset_mode
         self.metadata = dict(self.metadata, autoreset_mode=autoreset_mode,
@@ -66,7 +74,7 @@ class PennyVectorEnv(VectorEnv):
         self._setup()
 
     def _setup(self):
-        c = self._core = Core(self.scene, self.task)
+        c = self._core = Core(self.scene, self.task, backend=self.backend)
         n = self.num_envs
         self.single_action_space = spaces.Box(-1.0, 1.0, (c.n_act,), np.float32)
         lo, hi = c.obs_bounds()
@@ -87,7 +95,7 @@ class PennyVectorEnv(VectorEnv):
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        self._core = Core(self.scene, self.task)
+        self._core = Core(self.scene, self.task, backend=self.backend)
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):

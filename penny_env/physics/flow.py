@@ -13,7 +13,7 @@ j1(x) = (sin x - x cos x)/x^2 (a series below |x| = 1), with x = phi_dot0 t / 2:
 
 exact for phi_dot -> 0, long intervals and fast spin alike (no division by phi_dot).
 
-acc1 != 0: composite Gauss-Legendre with at most 3 rad of phase per panel and 8, 10 or 12
+acc1 != 0: composite Gauss-Legendre with at most 3 rad of phase per panel and 6 to 12
 nodes by the phase a panel sweeps (RULES). The integrand is entire and the rules reach
 round-off for their sweeps, so the result is exact to round-off for any acc1 (no cancellation
 as acc1 -> 0, where Fresnel closed forms subtract large numbers). Work grows with the phase
@@ -28,14 +28,14 @@ from .kernels import angles_at, displacement_closed, end_point, sinc_kernels  # 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
 MAX_PHASE_PER_PANEL = 3.0
-# Gauss-Legendre rules on [0, 1] by the phase a panel sweeps: the integrand (W + acc2 s) e^{i phi(s)}
-# is entire, and these rules reach round-off (<= 4e-16 relative, checked against mpmath in
-# tests/test_flow.py) for sweeps up to 0.5, 1.5 and 3 rad. Control periods of RL scenes sweep
-# well under 0.5 rad, so they cost 8 nodes.
+# Gauss-Legendre rules on [0, 1] by the phase a panel sweeps (phase_sweep): the integrand
+# (W + acc2 s) e^{i phi(s)} is entire, and the n-node rule's truncation error stays below 5e-17 of
+# the integral of |W + acc2 s| for sweeps up to its limit (the table made by
+# tests/reference/quadrature_rules.py with mpmath; tests/test_flow.py checks each limit against
+# mpmath through flow()). Control periods of RL scenes sweep about 0.1 rad: 6 or 7 nodes.
+RULE_SIZES = ((0.1, 6), (0.3, 7), (0.8, 8), (1.5, 9), (2.0, 10), (MAX_PHASE_PER_PANEL, 12))
 RULES = tuple((limit, tuple((0.5 * (x + 1.0)).tolist()), tuple((0.5 * wt).tolist()))
-              for limit, (x, wt) in ((0.5, np.polynomial.legendre.leggauss(8)),
-                                     (1.5, np.polynomial.legendre.leggauss(10)),
-                                     (MAX_PHASE_PER_PANEL, np.polynomial.legendre.leggauss(12))))
+              for limit, (x, wt) in ((limit, np.polynomial.legendre.leggauss(n)) for limit, n in RULE_SIZES))
 # The same rules as equal-length tuples (zero-padded) with their node counts: the form the scalar
 # loop (scalar.displacement1) indexes, in plain Python and compiled alike.
 RULE_LIMITS = tuple(r[0] for r in RULES)

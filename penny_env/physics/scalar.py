@@ -5,14 +5,14 @@ overhead would dominate. These functions run the same kernels (kernels.py) in th
 as the batched code, so a penny gives bitwise the same trajectory here and inside a batch
 (tests/test_scalar_batch.py checks this). States are 6-tuples (x, y, theta, phi, theta_dot, phi_dot).
 
-The code is also numba-compatible: everything a penny needs travels in a :class:`Model`
-(floats, ints and a tuple of table constants) and two table functions ``terms(tp, x, y) ->
-(h, hx, hy)`` and ``hess(tp, x, y) -> (hxx, hxy, hyy)``, so physics/compiled.py compiles these very
+The code is also numba-compatible: everything a penny needs travels in a :class:`Model` of plain
+numbers (the table's kind and constants included), so physics/compiled.py compiles these very
 functions for the vector environment. In plain Python they run as they are.
 """
 from __future__ import annotations
 
 import math
+import weakref
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -20,6 +20,9 @@ from .flow import MAX_PHASE_PER_PANEL, RULE_COUNTS, RULE_LIMITS, RULE_NODES, RUL
 from .kernels import (SCALAR, acceleration_bound, angles_at, curvature_bounds, curvature_step, displacement_closed,
                       end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
                       time_resolution)
+
+
+ELLIPSE, STADIUM, OTHER = 0, 1, 2  # Model.kind: the table's formulas
 
 
 class Model(NamedTuple):
@@ -41,62 +44,83 @@ class Model(NamedTuple):
     zeno_impacts: int
     zeno_window: float
     max_events: int
-    tp: tuple            # the table's constants for terms / hess
+    kind: int            # ELLIPSE (and Circle), STADIUM or OTHER (any table, through its methods)
+    other: int           # OTHER: the key of the table in _OTHER_TABLES
+    t0: float            # t0..t4: the built-in table's constants
+    t1: float
+    t2: float
+    t3: float
+    t4: float
 
 
-# -- the built-in tables' formulas (the same expressions as their methods, so the same values) ----
-def ellipse_terms(tp, x, y):
-    ia2, ib2, hc = tp[0], tp[1], tp[2]
+# -- the tables' formulas: wall_terms(m, x, y) -> (h, hx, hy), wall_hess(m, x, y) -> (hxx, hxy, hyy) ------
+# The built-in tables' are inlined (the same expressions as their methods, so the same values);
+# any other table is called through its methods (plain Python only, see physics/compiled.py).
+_OTHER_TABLES = weakref.WeakValueDictionary()
+
+
+def ellipse_terms(m, x, y):
+    ia2, ib2, hc = m.t0, m.t1, m.t2
     c2 = 2.0 * hc
     return (x * x * ia2 + y * y * ib2 - 1.0) * hc, c2 * x * ia2, c2 * y * ib2
 
 
-def ellipse_hess(tp, x, y):
-    c2 = 2.0 * tp[2]
-    return c2 * tp[0], 0.0, c2 * tp[1]
+def ellipse_hess(m, x, y):
+    c2 = 2.0 * m.t2
+    return c2 * m.t0, 0.0, c2 * m.t1
 
 
-def stadium_terms(tp, x, y):
-    half, r, r2, two_r = tp[0], tp[1], tp[2], tp[3]
+def stadium_terms(m, x, y):
+    half, r, r2, two_r = m.t0, m.t1, m.t2, m.t3
     dx = x - min(max(x, -half), half)
     return (dx * dx + y * y - r2) / two_r, dx / r, y / r
 
 
-def stadium_hess(tp, x, y):
-    half, inv = tp[0], tp[4]
+def stadium_hess(m, x, y):
+    half, inv = m.t0, m.t4
     return (inv if x - min(max(x, -half), half) != 0.0 else 0.0), 0.0, inv
 
 
-def table_functions(table):
-    """(terms, hess, tp, builtin) for a table: the built-in tables' inlined formulas, any other
-    table through its methods (builtin False: not compilable)."""
+def other_terms(m, x, y):
+    table = _OTHER_TABLES[m.other]
+    hx, hy = table.grad(x, y)
+    return table.h(x, y), hx, hy
+
+
+def other_hess(m, x, y):
+    return _OTHER_TABLES[m.other].hessian(x, y)
+
+
+def wall_terms(m, x, y):
+    if m.kind == ELLIPSE:
+        return ellipse_terms(m, x, y)
+    if m.kind == STADIUM:
+        return stadium_terms(m, x, y)
+    return other_terms(m, x, y)
+
+
+def wall_hess(m, x, y):
+    if m.kind == ELLIPSE:
+        return ellipse_hess(m, x, y)
+    if m.kind == STADIUM:
+        return stadium_hess(m, x, y)
+    return other_hess(m, x, y)
+
+
+def table_constants(table):
+    """(kind, constants t0..t4) of a table."""
     from .tables import Circle, Ellipse, Stadium
 
     if type(table) in (Ellipse, Circle):
-        return ellipse_terms, ellipse_hess, (table._ia2, table._ib2, table._half_c), True
+        return ELLIPSE, (table._ia2, table._ib2, table._half_c, 0.0, 0.0)
     if type(table) is Stadium:
         r = table.radius
-        return stadium_terms, stadium_hess, (table._half, r, r ** 2, 2.0 * r, 1.0 / r), True
-
-    def terms(tp, x, y):
-        hx, hy = table.grad(x, y)
-        return table.h(x, y), hx, hy
-
-    hessian = getattr(table, "hessian", None)
-
-    def hess(tp, x, y):
-        return hessian(x, y)
-    return terms, (hess if hessian is not None else None), (), False
+        return STADIUM, (table._half, r, r ** 2, 2.0 * r, 1.0 / r)
+    return OTHER, (0.0,) * 5
 
 
-def table_terms(table):
-    """(x, y) -> (h, hx, hy) and (x, y) -> Hessian (or None) for floats."""
-    terms, hess, tp, _ = table_functions(table)
-    return (lambda x, y: terms(tp, x, y)), (None if hess is None else (lambda x, y: hess(tp, x, y)))
-
-
-def scalar_model(params, table, law, settings):
-    """(Model, terms, hess) for the physics objects (table None: the open plane)."""
+def scalar_model(params, table, law, settings) -> Model:
+    """The Model of the physics objects (table None: the open plane)."""
     try:
         return _cached_model(params, table, law, settings)
     except TypeError:  # an unhashable user table
@@ -107,16 +131,19 @@ def _build_model(params, table, law, settings):
     from .events import third_order
 
     if table is None:
-        terms = hess = None
-        tp, G, L, third, D3, jump, delta = (), 0.0, 0.0, False, 0.0, 0.0, 0.0
+        kind, consts, G, L, third, D3, jump, delta = OTHER, (0.0,) * 5, 0.0, 0.0, False, 0.0, 0.0, 0.0
+        other = 0
     else:
-        terms, hess, tp, _ = table_functions(table)
+        kind, consts = table_constants(table)
+        other = 0
+        if kind == OTHER:
+            other = id(table)
+            _OTHER_TABLES[other] = table
         third, D3, jump = third_order(table)
         G, L, delta = float(table.grad_bound), float(table.hessian_bound), settings.contact_tol * table.size
-    model = Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta,
-                  float(law.e), law.kind == "plastic", int(settings.max_search_steps), int(settings.zeno_impacts),
-                  float(settings.zeno_window), int(settings.max_events_per_interval), tp)
-    return model, terms, hess
+    return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta,
+                 float(law.e), law.kind == "plastic", int(settings.max_search_steps), int(settings.zeno_impacts),
+                 float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
 
 _cached_model = lru_cache(maxsize=64)(_build_model)
@@ -159,35 +186,35 @@ def flow1(s, acc1, acc2, t, R):
 
 
 # -- impact search -----------------------------------------------------------------------------------
-def wall1(s, sigma, m, terms):
+def wall1(s, sigma, m):
     """(h(end), d/dt h(end)) for end sigma."""
     px, py, vx, vy = end_point(s[0], s[1], s[3], s[4], s[5], sigma, m.R, SCALAR)
-    g, hx, hy = terms(m.tp, px, py)
+    g, hx, hy = wall_terms(m, px, py)
     return g, hx * vx + hy * vy
 
 
-def end_plain1(x, y, c, sn, W, w, sigma, m, terms, M):
+def end_plain1(x, y, c, sn, W, w, sigma, m, M):
     """(g, g', plain certified step, end position, gradient) of one end (see events.end_step);
     c, sn = cos, sin of the heading."""
     R = m.R
     sR = sigma * R
     px, py = x + sR * c, y + sR * sn
-    g, hx, hy = terms(m.tp, px, py)
+    g, hx, hy = wall_terms(m, px, py)
     gd = hx * (R * W * c - sR * w * sn) + hy * (R * W * sn + sR * w * c)
     return g, gd, search_step(g, gd, M, m.delta, SCALAR), px, py, hx, hy
 
 
-def with_curvature1(end, c, sn, W, w, sigma, acc1, acc2, m, hess, M, K, V2, rem):
+def with_curvature1(end, c, sn, W, w, sigma, acc1, acc2, m, M, K, V2, rem):
     """The end's step, improved by the curvature step where that can help (see events.end_step)."""
     g, gd, step, px, py, hx, hy = end
     if step < rem and (gd <= 0.0 or gd * gd < 2.0 * M * abs(g)):
-        hxx, hxy, hyy = hess(m.tp, px, py)
+        hxx, hxy, hyy = wall_hess(m, px, py)
         A = local_curvature(c, sn, W, w, acc1, acc2, sigma, m.R, hx, hy, hxx, hxy, hyy, SCALAR)
         step = max(step, curvature_step(g, gd, A + m.jump * V2, M, K, m.delta, SCALAR))
     return step
 
 
-def certified_free1(s, acc1, acc2, dt, m, terms):
+def certified_free1(s, acc1, acc2, dt, m):
     """The first step of the impact search from t = 0 finds no end touching the wall and certifies
     the whole period [0, dt], so the period has no impact and advance() returns flow(s, dt)."""
     R = m.R
@@ -198,7 +225,7 @@ def certified_free1(s, acc1, acc2, dt, m, terms):
     RW = R * W
     tau = math.inf
     for sR in (R, -R):
-        g, hx, hy = terms(m.tp, x + sR * c, y + sR * sn)
+        g, hx, hy = wall_terms(m, x + sR * c, y + sR * sn)
         sRw = sR * w
         gd = hx * (RW * c - sRw * sn) + hy * (RW * sn + sRw * c)
         if g >= -delta and gd > 0.0:
@@ -207,7 +234,7 @@ def certified_free1(s, acc1, acc2, dt, m, terms):
     return not tau < dt
 
 
-def first_impact_m(s0, acc1, acc2, horizon, m, terms, hess):
+def first_impact_m(s0, acc1, acc2, horizon, m):
     """(t_hit, end) as events.first_impact: end 0 = none (t_hit inf), 2 = step budget spent."""
     R = m.R
     delta = m.delta
@@ -224,8 +251,8 @@ def first_impact_m(s0, acc1, acc2, horizon, m, terms, hess):
         if not free and t != 0.0:
             V2, A, J = motion_bounds(W, W_end, w, w_end, acc1, acc2, R, SCALAR)
             M, K = curvature_bounds(V2, A, J, G, L, D3, SCALAR)
-        ef = end_plain1(x, y, c, sn, W, w, 1.0, m, terms, M)
-        eb = end_plain1(x, y, c, sn, W, w, -1.0, m, terms, M)
+        ef = end_plain1(x, y, c, sn, W, w, 1.0, m, M)
+        eb = end_plain1(x, y, c, sn, W, w, -1.0, m, M)
         gf, gdf, step_f = ef[0], ef[1], ef[2]
         gb, gdb, step_b = eb[0], eb[1], eb[2]
         hit_f = gf >= -delta and gdf > 0.0
@@ -239,15 +266,15 @@ def first_impact_m(s0, acc1, acc2, horizon, m, terms, hess):
             # matters when the first end's step exceeds the other's plain step (same tau as events.py)
             rem = horizon - t
             if step_f <= step_b:
-                s1 = with_curvature1(ef, c, sn, W, w, 1.0, acc1, acc2, m, hess, M, K, V2, rem)
+                s1 = with_curvature1(ef, c, sn, W, w, 1.0, acc1, acc2, m, M, K, V2, rem)
                 s2 = step_b
                 if s1 > s2:
-                    s2 = with_curvature1(eb, c, sn, W, w, -1.0, acc1, acc2, m, hess, M, K, V2, rem)
+                    s2 = with_curvature1(eb, c, sn, W, w, -1.0, acc1, acc2, m, M, K, V2, rem)
             else:
-                s1 = with_curvature1(eb, c, sn, W, w, -1.0, acc1, acc2, m, hess, M, K, V2, rem)
+                s1 = with_curvature1(eb, c, sn, W, w, -1.0, acc1, acc2, m, M, K, V2, rem)
                 s2 = step_f
                 if s1 > s2:
-                    s2 = with_curvature1(ef, c, sn, W, w, 1.0, acc1, acc2, m, hess, M, K, V2, rem)
+                    s2 = with_curvature1(ef, c, sn, W, w, 1.0, acc1, acc2, m, M, K, V2, rem)
             step_f, step_b = s1, s2
         t = t + min(step_f, step_b)
         if not t < horizon:
@@ -256,12 +283,12 @@ def first_impact_m(s0, acc1, acc2, horizon, m, terms, hess):
 
 
 # -- impacts -------------------------------------------------------------------------------------
-def relocate1(s, m, terms):
+def relocate1(s, m):
     """Move the contact point so that neither end is outside the wall (round-off repairs)."""
     x, y = s[0], s[1]
     for sigma in (1.0, -1.0):
         px, py, _, _ = end_point(x, y, s[3], s[4], s[5], sigma, m.R, SCALAR)
-        g, hx, hy = terms(m.tp, px, py)
+        g, hx, hy = wall_terms(m, px, py)
         if g > 0.0:
             k = g / (hx * hx + hy * hy)
             x -= k * hx
@@ -269,11 +296,11 @@ def relocate1(s, m, terms):
     return (x, y, s[2], s[3], s[4], s[5])
 
 
-def law1(s, sigma, m, terms):
+def law1(s, sigma, m):
     """Post-impact state of end sigma (see laws.apply_law)."""
     R = m.R
     px, py, _, _ = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
-    _, hx, hy = terms(m.tp, px, py)
+    _, hx, hy = wall_terms(m, px, py)
     c, sn = math.cos(s[3]), math.sin(s[3])
     a = R * (hx * c + hy * sn)
     b = sigma * R * (hy * c - hx * sn)
@@ -281,13 +308,13 @@ def law1(s, sigma, m, terms):
     return (s[0], s[1], s[2], s[3], W, w)
 
 
-def pushes_out1(s, acc1, acc2, m, terms, delta):
+def pushes_out1(s, acc1, acc2, m, delta):
     """At rest, would the controls drive an end that touches the wall outward?"""
     R = m.R
     c, sn = math.cos(s[3]), math.sin(s[3])
     for sigma in (1.0, -1.0):
         px, py, _, _ = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
-        g, hx, hy = terms(m.tp, px, py)
+        g, hx, hy = wall_terms(m, px, py)
         ax = R * (acc2 * c - sigma * acc1 * sn)
         ay = R * (acc2 * sn + sigma * acc1 * c)
         if g >= -delta and hx * ax + hy * ay > 0.0:
@@ -295,7 +322,7 @@ def pushes_out1(s, acc1, acc2, m, terms, delta):
     return False
 
 
-def advance_m(s, acc1, acc2, dt, m, terms, hess, stop_after):
+def advance_m(s, acc1, acc2, dt, m, stop_after):
     """One penny over one control interval with walls (see advance.advance); stop_after <= 0: no limit.
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
@@ -313,16 +340,16 @@ def advance_m(s, acc1, acc2, dt, m, terms, hess, stop_after):
     delta = m.delta
     while True:
         rem = dt - elapsed
-        t_hit, end = first_impact_m(s, acc1, acc2, rem, m, terms, hess)
+        t_hit, end = first_impact_m(s, acc1, acc2, rem, m)
         if end == 0:
             return flow1(s, acc1, acc2, rem, R), impacts, rests, dt
-        pre = relocate1(flow1(s, acc1, acc2, t_hit, R), m, terms)
-        if end == 2 or wall1(pre, float(end), m, terms)[1] <= 0.0:
+        pre = relocate1(flow1(s, acc1, acc2, t_hit, R), m)
+        if end == 2 or wall1(pre, float(end), m)[1] <= 0.0:
             # search budget spent on a tangency, or a grazing touch that turned inward: go on from there
             s = pre
             elapsed += t_hit
             continue
-        post = law1(pre, float(end), m, terms)
+        post = law1(pre, float(end), m)
         elapsed += t_hit
         t_impact = elapsed
         n_events += 1
@@ -335,7 +362,7 @@ def advance_m(s, acc1, acc2, dt, m, terms, hess, stop_after):
         if streak >= m.zeno_impacts or n_events >= m.max_events:
             post = (post[0], post[1], post[2], post[3], 0.0, 0.0)
             streak = 0
-            pinned = pushes_out1(post, acc1, acc2, m, terms, 64 * delta)
+            pinned = pushes_out1(post, acc1, acc2, m, 64 * delta)
             rests.append((t_impact, pinned))
             if pinned:
                 done = True
@@ -353,8 +380,7 @@ def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
     """(t_hit, end) as events.first_impact for one penny."""
     from .laws import make_law
 
-    model, terms, hess = scalar_model(params, table, make_law("elastic"), settings)
-    return first_impact_m(tuple(s0), acc1, acc2, horizon, model, terms, hess)
+    return first_impact_m(tuple(s0), acc1, acc2, horizon, scalar_model(params, table, make_law("elastic"), settings))
 
 
 def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
@@ -364,5 +390,5 @@ def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
     rests a list of (time, pinned)."""
     if table is None:
         return flow1(s, acc1, acc2, dt, params.R), [], [], dt
-    model, terms, hess = scalar_model(params, table, law, settings)
-    return advance_m(tuple(s), acc1, acc2, dt, model, terms, hess, 0 if stop_after is None else int(stop_after))
+    model = scalar_model(params, table, law, settings)
+    return advance_m(tuple(s), acc1, acc2, dt, model, 0 if stop_after is None else int(stop_after))

@@ -1,0 +1,198 @@
+"""Compiled batches (optional, numba): physics/scalar.py's own functions, compiled, run over the
+pennies of a batch in parallel.
+
+Nothing here restates the physics. :func:`compiled_functions` takes the functions of kernels.py,
+flow.py and scalar.py as they are and compiles copies of them with numba, in which the math
+namespace ``SCALAR`` is physics/numba_math.py (the same ``math`` functions, for numba). The only
+new code is the loop over pennies (``_advance_batch``, ``_flow_batch``) and the unpacking of their
+impacts into arrays. A penny therefore takes the same operations as in the plain-Python loop
+(single environment) and in the numpy batch (physics.advance); tests/test_compiled.py checks that
+the three agree.
+
+numba is an optional dependency (``pip install "penny_env[fast]"``, included in ``[all]``); without
+it :func:`available` is False and the environments use the numpy batch. Only the built-in tables
+(Ellipse, Circle, Stadium) compile; other tables use the numpy batch. The first use in a fresh
+install compiles for some seconds and numba caches the machine code on disk (``cache=True``).
+"""
+from __future__ import annotations
+
+import builtins
+import importlib
+import importlib.util
+import math
+import types
+
+import numpy as np
+
+# capacity of the per-penny impact buffer of one batch call; a penny with more impacts in one
+# interval (accumulations) is rerun alone to collect them all
+IMPACT_CAPACITY = 8
+
+_COMPILED = None
+
+
+def available() -> bool:
+    """numba is installed, so compiled batches can run (numba itself is imported at first use)."""
+    return importlib.util.find_spec("numba") is not None
+
+
+def _other_table(m, x, y):
+    """Stands in for scalar.other_terms / other_hess, which call Python objects: compiled models
+    only ever have the built-in kinds (CompiledBatch refuses other tables)."""
+    return np.nan, np.nan, np.nan
+
+
+def _drop_stale_cache(modules) -> None:
+    """numba checks a cached function against its own file only, while these functions also
+    freeze constants of the other physics modules (quadrature rules, table kinds): drop the
+    package's cached machine code when any of the modules changed since it was written."""
+    from pathlib import Path
+    import hashlib
+
+    folder = Path(__file__).with_name("__pycache__")
+    digest = hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in modules)).hexdigest()
+    stamp = folder / "penny_env_numba.stamp"
+    try:
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for f in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
+            f.unlink(missing_ok=True)
+        folder.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # read-only install: numba caches elsewhere (or not at all)
+        pass
+
+
+def compiled_functions() -> dict:
+    """name -> compiled function, for kernels.py, flow.phase_sweep and scalar.py (compiled once)."""
+    global _COMPILED
+    if _COMPILED is not None:
+        return _COMPILED
+    try:
+        import numba
+    except ImportError:
+        raise ImportError('the compiled backend needs numba: pip install "penny_env[fast]"') from None
+    from . import kernels, numba_math, scalar
+    flow = importlib.import_module(".flow", __package__)  # the module (the package exports the function flow)
+    _drop_stale_cache((kernels, flow, scalar, numba_math, importlib.import_module(__name__)))
+
+    jit = numba.njit(cache=True)
+    namespace = {"__builtins__": builtins}
+    for module in (kernels, flow, scalar):
+        namespace.update({k: v for k, v in vars(module).items() if not k.startswith("__")})
+    namespace["SCALAR"] = namespace["ARRAY"] = numba_math
+    sources = [f for module in (kernels, scalar) for f in vars(module).values()
+               if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
+    sources.append(flow.phase_sweep)
+    for f in sources:
+        defaults = tuple(numba_math if isinstance(d, types.ModuleType) else d for d in (f.__defaults__ or ()))
+        copy = types.FunctionType(f.__code__, namespace, f.__name__, defaults, f.__closure__)
+        copy.__module__, copy.__qualname__ = f.__module__, f.__qualname__
+        namespace[f.__name__] = jit(copy)
+    namespace["other_terms"] = namespace["other_hess"] = jit(_other_table)
+    fns = {f.__name__: namespace[f.__name__] for f in sources}
+    free1, flow1, advance_m = fns["certified_free1"], fns["flow1"], fns["advance_m"]
+
+    @numba.njit(parallel=True, cache=True)
+    def _advance_batch(S, acc1, acc2, dt, m, out, counts, times, ends, posts):
+        cap = times.shape[1]
+        for i in numba.prange(S.shape[1]):
+            s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+            a1, a2 = acc1[i], acc2[i]
+            k = 0
+            if free1(s, a1, a2, dt, m):
+                s1 = flow1(s, a1, a2, dt, m.R)
+            else:
+                s1, impacts, rests, elapsed = advance_m(s, a1, a2, dt, m, 0)
+                k = len(impacts)
+                for j in range(min(k, cap)):
+                    times[i, j] = impacts[j][0]
+                    ends[i, j] = impacts[j][1]
+                    post = impacts[j][2]
+                    for r in range(6):
+                        posts[i, j, r] = post[r]
+            counts[i] = k
+            for r in range(6):
+                out[r, i] = s1[r]
+
+    @numba.njit(parallel=True, cache=True)
+    def _flow_batch(S, acc1, acc2, dt, R, out):
+        for i in numba.prange(S.shape[1]):
+            s1 = flow1((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), acc1[i], acc2[i], dt, R)
+            for r in range(6):
+                out[r, i] = s1[r]
+
+    @numba.njit(parallel=True, cache=True)
+    def _heading_trig(S, out):
+        for i in numba.prange(S.shape[1]):
+            th, ph = S[2, i], S[3, i]
+            out[0, i] = math.cos(th)
+            out[1, i] = math.sin(th)
+            out[2, i] = math.cos(ph)
+            out[3, i] = math.sin(ph)
+
+    fns["_advance_batch"], fns["_flow_batch"], fns["_heading_trig"] = _advance_batch, _flow_batch, _heading_trig
+    _COMPILED = fns
+    return fns
+
+
+class CompiledBatch:
+    """advance() over one control interval for (6, N) batches, compiled (see the module docstring).
+
+    ``CompiledBatch(params, table, law, settings)``; table None is the open plane. Raises ImportError
+    without numba and ValueError for a table that does not compile (not Ellipse/Circle/Stadium)."""
+
+    def __init__(self, params, table, law, settings):
+        from .scalar import OTHER, scalar_model
+
+        self.model = scalar_model(params, table, law, settings)
+        if table is not None and self.model.kind == OTHER:
+            raise ValueError(f"table: only the built-in tables compile, got {type(table).__name__}")
+        self._fns = compiled_functions()
+        self.R = params.R
+        self.plane = table is None
+
+    def advance(self, S, acc1, acc2, dt):
+        """(new S (6, N), log): log None when no penny hit the wall, else (env, time, end, post (k, 6))
+        sorted by penny then time, as physics.advance's EventLog."""
+        S = np.ascontiguousarray(S, dtype=np.float64)
+        acc1 = np.ascontiguousarray(acc1, dtype=np.float64)
+        acc2 = np.ascontiguousarray(acc2, dtype=np.float64)
+        n = S.shape[1]
+        out = np.empty_like(S)
+        if self.plane:
+            self._fns["_flow_batch"](S, acc1, acc2, float(dt), self.R, out)
+            return out, None
+        cap = IMPACT_CAPACITY
+        counts = np.zeros(n, dtype=np.int64)
+        times = np.empty((n, cap))
+        ends = np.empty((n, cap), dtype=np.int64)
+        posts = np.empty((n, cap, 6))
+        self._fns["_advance_batch"](S, acc1, acc2, float(dt), self.model, out, counts, times, ends, posts)
+        total = int(counts.sum())
+        if total == 0:
+            return out, None
+        env = np.repeat(np.arange(n), counts)
+        rank = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+        stored = rank < cap
+        t = np.empty(total)
+        e = np.empty(total, dtype=np.int8)
+        post = np.empty((total, 6))
+        t[stored] = times[env[stored], rank[stored]]
+        e[stored] = ends[env[stored], rank[stored]]
+        post[stored] = posts[env[stored], rank[stored]]
+        for i in np.flatnonzero(counts > cap):  # more impacts than the buffer holds: rerun this penny alone
+            s = tuple(float(v) for v in S[:, i])
+            _, impacts, _, _ = self._fns["advance_m"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model, 0)
+            rows = np.flatnonzero(env == i)
+            t[rows] = [imp[0] for imp in impacts]
+            e[rows] = [imp[1] for imp in impacts]
+            post[rows] = [imp[2] for imp in impacts]
+        return out, (env, t, e, post)
+
+    def angle_trig(self, S):
+        """(4, N): cos theta, sin theta, cos phi, sin phi of (6, N) states (math.cos / math.sin,
+        the values numpy gives here), in parallel."""
+        out = np.empty((4, S.shape[1]))
+        self._fns["_heading_trig"](np.ascontiguousarray(S, dtype=np.float64), out)
+        return out
