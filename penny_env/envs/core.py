@@ -177,8 +177,14 @@ class Core:
         return np.zeros(n), a[:, 0] * self.gain2
 
     # -- observations --------------------------------------------------------------------
-    def observe(self, S, target, count=None):
-        """(N, obs_dim) float32 observations (layout in PennyEnv's docstring)."""
+    @staticmethod
+    def angle_trig(S):
+        """(4, N): cos theta, sin theta, cos phi, sin phi."""
+        return np.stack([np.cos(S[THETA]), np.sin(S[THETA]), np.cos(S[PHI]), np.sin(S[PHI])])
+
+    def observe(self, S, target, count=None, trig=None):
+        """(N, obs_dim) float32 observations (layout in PennyEnv's docstring); trig: angle_trig(S)
+        if already known."""
         n = S.shape[1]
         o = np.empty((self.obs_dim, n))
         rx = target[0] - S[X]
@@ -190,13 +196,7 @@ class Core:
         if self.plane:
             np.tanh(o[0:2], out=o[0:2])
             np.tanh(o[8:10], out=o[8:10])
-        if self.compiled is not None:
-            o[2:6] = self.compiled.angle_trig(S)
-        else:
-            o[2] = np.cos(S[THETA])
-            o[3] = np.sin(S[THETA])
-            o[4] = np.cos(S[PHI])
-            o[5] = np.sin(S[PHI])
+        o[2:6] = self.angle_trig(S) if trig is None else trig
         o[6] = np.tanh(S[THETA_DOT] * self.s_W)
         o[7] = np.tanh(S[PHI_DOT] * self.s_w)
         if self.impacts:
@@ -209,15 +209,22 @@ class Core:
         return np.sqrt(dx * dx + dy * dy)
 
     # -- physics ---------------------------------------------------------------------------
-    def advance(self, S, acc1, acc2):
+    def advance(self, S, acc1, acc2, trig_out=None):
         """(new S, log arrays (env, time, end, state (k, 6))) over one control period, batched.
 
         The open plane is one closed-form (or quadrature) flow. With walls, the pennies whose first
         certified search step excludes an impact are flowed directly (what advance() would do),
         the others go through physics.advance(). The numba backend runs the physics' scalar loop,
-        compiled, over all pennies (physics/compiled.py): the same operations, penny by penny."""
+        compiled, over all pennies (physics/compiled.py): the same operations, penny by penny.
+        trig_out: optional (4, N) array that receives angle_trig(new S)."""
         if self.compiled is not None:
-            return self.compiled.advance(S, acc1, acc2, self.dt)
+            return self.compiled.advance(S, acc1, acc2, self.dt, trig_out)
+        S, log = self._advance_numpy(S, acc1, acc2)
+        if trig_out is not None:
+            trig_out[:] = self.angle_trig(S)
+        return S, log
+
+    def _advance_numpy(self, S, acc1, acc2):
         if self.plane:
             return flow(S, acc1, acc2, self.dt, self.R), None
         free = certified_free(S, acc1, acc2, self.dt, self.params, self.table, self.settings)

@@ -141,12 +141,13 @@ class PennyVectorEnv(VectorEnv):
             self._steps = np.zeros(n, dtype=np.int64)
             self._count = np.zeros(n, dtype=np.int64)
             self._t = np.zeros(n)
+            self._trig = np.zeros((4, n))  # cos/sin of theta and phi of self._S (for observations)
             self._d = np.zeros(n)
             self._done = np.zeros(n, dtype=bool)
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         self._reset_envs(mask)
         self._autoreset = np.zeros(n, dtype=bool)
-        obs = self._core.observe(self._S, self._target, self._count)
+        obs = self._core.observe(self._S, self._target, self._count, self._trig)
         info = {"kinetic_energy": kinetic_energy(self._S, self._core.params), "_kinetic_energy": self._true.copy(),
                 "time": self._t.copy(), "_time": self._true.copy(), "distance": self._d.copy(), "_distance": self._true.copy()}
         return obs, info
@@ -158,6 +159,7 @@ class PennyVectorEnv(VectorEnv):
         c = self._core
         S, target, arc = c.sample(self._keys[idx], self._episodes[idx])
         self._S[:, idx] = S
+        self._trig[:, idx] = c.angle_trig(S)
         self._target[:, idx] = target
         self._arc[:, idx] = arc
         self._steps[idx] = 0
@@ -197,7 +199,7 @@ class PennyVectorEnv(VectorEnv):
             ctrl = (a[:, 0] * a[:, 0] + a[:, 1] * a[:, 1]) / 2
         else:
             ctrl = (a[:, 0] * a[:, 0]) / 1
-        S, log = c.advance(self._S, acc1, acc2)
+        S, log = c.advance(self._S, acc1, acc2, self._trig)
         reset_now = self._autoreset  # NEXT_STEP: envs whose episode ended at the previous step
         self._S = S
         if log is not None:
@@ -237,10 +239,10 @@ class PennyVectorEnv(VectorEnv):
                 truncated = truncated & ~reset_now
                 done = done & ~reset_now
                 self._blank_info(info, reset_now)
-            obs = c.observe(self._S, self._target, self._count)
+            obs = c.observe(self._S, self._target, self._count, self._trig)
             self._autoreset = done
         else:
-            obs = c.observe(self._S, self._target, self._count)
+            obs = c.observe(self._S, self._target, self._count, self._trig)
             if done.any():
                 idx = np.flatnonzero(done)
                 final_obs = np.empty(n, dtype=object)
@@ -252,7 +254,7 @@ class PennyVectorEnv(VectorEnv):
                 info["final_info"], info["_final_info"] = final_info, done.copy()
                 self._episodes[done] += np.uint64(1)
                 self._reset_envs(done)
-                obs = c.observe(self._S, self._target, self._count)
+                obs = c.observe(self._S, self._target, self._count, self._trig)
         return obs, reward.astype(np.float64), terminated, truncated, info
 
     def _info(self, counts, log, S):

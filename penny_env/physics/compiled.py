@@ -81,6 +81,10 @@ def compiled_functions() -> dict:
     for module in (kernels, flow, scalar):
         namespace.update({k: v for k, v in vars(module).items() if not k.startswith("__")})
     namespace["SCALAR"] = namespace["ARRAY"] = numba_math
+    # the quadrature rules as 2-D arrays: the same numbers, which compiled code indexes faster than
+    # a tuple of tuples
+    for name in ("RULE_NODES", "RULE_WEIGHTS"):
+        namespace[name] = np.array(getattr(flow, name))
     sources = [f for module in (kernels, scalar) for f in vars(module).values()
                if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
     sources.append(flow.phase_sweep)
@@ -93,8 +97,17 @@ def compiled_functions() -> dict:
     fns = {f.__name__: namespace[f.__name__] for f in sources}
     free1, flow1, advance_m = fns["certified_free1"], fns["flow1"], fns["advance_m"]
 
+    @numba.njit(cache=True)
+    def _angle_trig(s, trig, i):
+        """cos theta, sin theta, cos phi, sin phi of state s into column i of trig (4, N)."""
+        if trig.shape[1] > i:
+            trig[0, i] = math.cos(s[2])
+            trig[1, i] = math.sin(s[2])
+            trig[2, i] = math.cos(s[3])
+            trig[3, i] = math.sin(s[3])
+
     @numba.njit(parallel=True, cache=True)
-    def _advance_batch(S, acc1, acc2, dt, m, out, counts, times, ends, posts):
+    def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
         cap = times.shape[1]
         for i in numba.prange(S.shape[1]):
             s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
@@ -114,24 +127,17 @@ def compiled_functions() -> dict:
             counts[i] = k
             for r in range(6):
                 out[r, i] = s1[r]
+            _angle_trig(s1, trig, i)
 
     @numba.njit(parallel=True, cache=True)
-    def _flow_batch(S, acc1, acc2, dt, R, out):
+    def _flow_batch(S, acc1, acc2, dt, R, out, trig):
         for i in numba.prange(S.shape[1]):
             s1 = flow1((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), acc1[i], acc2[i], dt, R)
             for r in range(6):
                 out[r, i] = s1[r]
+            _angle_trig(s1, trig, i)
 
-    @numba.njit(parallel=True, cache=True)
-    def _heading_trig(S, out):
-        for i in numba.prange(S.shape[1]):
-            th, ph = S[2, i], S[3, i]
-            out[0, i] = math.cos(th)
-            out[1, i] = math.sin(th)
-            out[2, i] = math.cos(ph)
-            out[3, i] = math.sin(ph)
-
-    fns["_advance_batch"], fns["_flow_batch"], fns["_heading_trig"] = _advance_batch, _flow_batch, _heading_trig
+    fns["_advance_batch"], fns["_flow_batch"] = _advance_batch, _flow_batch
     _COMPILED = fns
     return fns
 
@@ -151,24 +157,39 @@ class CompiledBatch:
         self._fns = compiled_functions()
         self.R = params.R
         self.plane = table is None
+        self._warm_up()
 
-    def advance(self, S, acc1, acc2, dt):
+    def _warm_up(self):
+        """Compile (or load from numba's cache) every path now rather than in the middle of a run:
+        a batch of one penny at rest, and the one-penny rerun used when a buffer overflows."""
+        S = np.zeros((6, 1))
+        S[4] = 1.0
+        zero = np.zeros(1)
+        self.advance(S, zero, zero, 1e-9)
+        if not self.plane:
+            self._fns["advance_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model, 0)
+
+    def advance(self, S, acc1, acc2, dt, trig_out=None):
         """(new S (6, N), log): log None when no penny hit the wall, else (env, time, end, post (k, 6))
-        sorted by penny then time, as physics.advance's EventLog."""
+        sorted by penny then time, as physics.advance's EventLog. trig_out: optional (4, N) array
+        that receives cos theta, sin theta, cos phi, sin phi of the new states (math.cos/sin)."""
         S = np.ascontiguousarray(S, dtype=np.float64)
         acc1 = np.ascontiguousarray(acc1, dtype=np.float64)
         acc2 = np.ascontiguousarray(acc2, dtype=np.float64)
         n = S.shape[1]
         out = np.empty_like(S)
+        trig = np.empty((4, 0)) if trig_out is None else trig_out
+        if trig.shape[1] not in (0, n) or trig.shape[0] != 4 or trig.dtype != np.float64 or not trig.flags.c_contiguous:
+            raise ValueError(f"trig_out must be a C-contiguous float64 array of shape (4, {n})")
         if self.plane:
-            self._fns["_flow_batch"](S, acc1, acc2, float(dt), self.R, out)
+            self._fns["_flow_batch"](S, acc1, acc2, float(dt), self.R, out, trig)
             return out, None
         cap = IMPACT_CAPACITY
         counts = np.zeros(n, dtype=np.int64)
         times = np.empty((n, cap))
         ends = np.empty((n, cap), dtype=np.int64)
         posts = np.empty((n, cap, 6))
-        self._fns["_advance_batch"](S, acc1, acc2, float(dt), self.model, out, counts, times, ends, posts)
+        self._fns["_advance_batch"](S, acc1, acc2, float(dt), self.model, out, trig, counts, times, ends, posts)
         total = int(counts.sum())
         if total == 0:
             return out, None
@@ -189,10 +210,3 @@ class CompiledBatch:
             e[rows] = [imp[1] for imp in impacts]
             post[rows] = [imp[2] for imp in impacts]
         return out, (env, t, e, post)
-
-    def angle_trig(self, S):
-        """(4, N): cos theta, sin theta, cos phi, sin phi of (6, N) states (math.cos / math.sin,
-        the values numpy gives here), in parallel."""
-        out = np.empty((4, S.shape[1]))
-        self._fns["_heading_trig"](np.ascontiguousarray(S, dtype=np.float64), out)
-        return out

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import angles_at, displacement_closed, end_point, sinc_kernels  # noqa: F401
+from .kernels import SMALL_ANGLE, angles_at, cis_small, displacement_closed, end_point, sinc_kernels  # noqa: F401
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
@@ -34,12 +34,17 @@ MAX_PHASE_PER_PANEL = 3.0
 # tests/reference/quadrature_rules.py with mpmath; tests/test_flow.py checks each limit against
 # mpmath through flow()). Control periods of RL scenes sweep about 0.1 rad: 6 or 7 nodes.
 RULE_SIZES = ((0.1, 6), (0.3, 7), (0.8, 8), (1.5, 9), (2.0, 10), (MAX_PHASE_PER_PANEL, 12))
-RULES = tuple((limit, tuple((0.5 * (x + 1.0)).tolist()), tuple((0.5 * wt).tolist()))
+# Each rule is (limit, centred nodes on [-1/2, 1/2], weights, small): a panel's integrand is
+# evaluated about its midpoint m, e^{i phi(m + u)} = e^{i phi(m)} e^{i psi(u)} with |psi| <= limit / 2,
+# so one sin/cos pair per panel; "small" rules (limit <= 2 SMALL_ANGLE) take e^{i psi} from
+# kernels.cis_small's polynomials, the others from libm.
+RULES = tuple((limit, tuple((0.5 * x).tolist()), tuple((0.5 * wt).tolist()), limit <= 2.0 * SMALL_ANGLE)
               for limit, (x, wt) in ((limit, np.polynomial.legendre.leggauss(n)) for limit, n in RULE_SIZES))
 # The same rules as equal-length tuples (zero-padded) with their node counts: the form the scalar
 # loop (scalar.displacement1) indexes, in plain Python and compiled alike.
 RULE_LIMITS = tuple(r[0] for r in RULES)
 RULE_COUNTS = tuple(len(r[1]) for r in RULES)
+RULE_SMALL = tuple(r[3] for r in RULES)
 _PAD = max(RULE_COUNTS)
 RULE_NODES = tuple(r[1] + (0.0,) * (_PAD - len(r[1])) for r in RULES)
 RULE_WEIGHTS = tuple(r[2] + (0.0,) * (_PAD - len(r[2])) for r in RULES)
@@ -64,24 +69,30 @@ def displacement_quadrature(W, w, ph, acc1, acc2, t, R):
     k = panel_counts(w, acc1, t)
     per_panel = phase_sweep(w, acc1, t) / k
     dx, dy = np.zeros(n), np.zeros(n)
-    rule = np.searchsorted(np.array([r[0] for r in RULES[:-1]]), per_panel, side="left")
-    for r, (_, nodes, weights) in enumerate(RULES):
+    rule = np.searchsorted(np.array(RULE_LIMITS[:-1]), per_panel, side="left")
+    for r, (_, nodes, weights, small) in enumerate(RULES):
         sel = np.flatnonzero(rule == r)
         if sel.size == 0:
             continue
         kk = k[sel]
         owner = np.repeat(sel, kk)
         panel = np.arange(owner.shape[0]) - np.repeat(np.cumsum(kk) - kk, kk)
-        width = (t / k)[owner][:, None]
-        o = owner[:, None]
-        s = (panel[:, None] + np.array(nodes)[None, :]) * width  # (panels, nodes)
-        phase = ph[o] + s * (w[o] + 0.5 * acc1[o] * s)
-        amp = (W[o] + acc2[o] * s) * np.array(weights)[None, :]
+        width = (t / k)[owner]
+        a1, a2 = acc1[owner], acc2[owner]
+        mid = (panel + 0.5) * width
+        phm = ph[owner] + mid * (w[owner] + 0.5 * a1 * mid)
+        wm = (w[owner] + a1 * mid)[:, None]
+        Wm = (W[owner] + a2 * mid)[:, None]
+        u = np.array(nodes)[None, :] * width[:, None]  # (panels, nodes)
+        psi = u * (wm + 0.5 * a1[:, None] * u)
+        amp = (Wm + a2[:, None] * u) * np.array(weights)[None, :]
+        cs, sn = cis_small(psi) if small else (np.cos(psi), np.sin(psi))
         # cumsum adds the nodes strictly in sequence (np.sum would add them pairwise)
-        px = np.cumsum(amp * np.cos(phase), axis=1)[:, -1]
-        py = np.cumsum(amp * np.sin(phase), axis=1)[:, -1]
-        dx += np.bincount(owner, weights=px * width[:, 0], minlength=n)
-        dy += np.bincount(owner, weights=py * width[:, 0], minlength=n)
+        px = np.cumsum(amp * cs, axis=1)[:, -1]
+        py = np.cumsum(amp * sn, axis=1)[:, -1]
+        cm, sm = np.cos(phm), np.sin(phm)
+        dx += np.bincount(owner, weights=(cm * px - sm * py) * width, minlength=n)
+        dy += np.bincount(owner, weights=(sm * px + cm * py) * width, minlength=n)
     return R * dx, R * dy
 
 

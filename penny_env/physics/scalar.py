@@ -16,8 +16,8 @@ import weakref
 from functools import lru_cache
 from typing import NamedTuple
 
-from .flow import MAX_PHASE_PER_PANEL, RULE_COUNTS, RULE_LIMITS, RULE_NODES, RULE_WEIGHTS, phase_sweep
-from .kernels import (SCALAR, acceleration_bound, angles_at, curvature_bounds, curvature_step, displacement_closed,
+from .flow import MAX_PHASE_PER_PANEL, RULE_COUNTS, RULE_LIMITS, RULE_NODES, RULE_SMALL, RULE_WEIGHTS, phase_sweep
+from .kernels import (SCALAR, acceleration_bound, angles_at, cis_small, curvature_bounds, curvature_step, displacement_closed,
                       end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
                       time_resolution)
 
@@ -158,19 +158,28 @@ def displacement1(W, w, ph, acc1, acc2, t, R):
     rule = 0
     while rule < len(RULE_LIMITS) - 1 and per_panel > RULE_LIMITS[rule]:
         rule += 1
-    nodes, weights = RULE_NODES[rule], RULE_WEIGHTS[rule]
+    nodes, weights, small = RULE_NODES[rule], RULE_WEIGHTS[rule], RULE_SMALL[rule]
     width = t / k
     dx = dy = 0.0
     for p in range(k):
+        mid = (p + 0.5) * width
+        phm = ph + mid * (w + 0.5 * acc1 * mid)
+        wm = w + acc1 * mid
+        Wm = W + acc2 * mid
         px = py = 0.0
         for j in range(RULE_COUNTS[rule]):
-            s = (p + nodes[j]) * width
-            phase = ph + s * (w + 0.5 * acc1 * s)
-            amp = (W + acc2 * s) * weights[j]
-            px += amp * math.cos(phase)
-            py += amp * math.sin(phase)
-        dx += px * width
-        dy += py * width
+            u = nodes[j] * width
+            psi = u * (wm + 0.5 * acc1 * u)
+            amp = (Wm + acc2 * u) * weights[j]
+            if small:
+                cs, sn = cis_small(psi, SCALAR)
+            else:
+                cs, sn = math.cos(psi), math.sin(psi)
+            px += amp * cs
+            py += amp * sn
+        cm, sm = math.cos(phm), math.sin(phm)
+        dx += (cm * px - sm * py) * width
+        dy += (sm * px + cm * py) * width
     return R * dx, R * dy
 
 
