@@ -33,7 +33,7 @@ def test_ids_cover_tasks_scenes_laws_actuations():
 
 def test_import_is_light():
     code = ("import sys, penny_env, gymnasium as gym; gym.make('PennyReach-Ellipse-v0');"
-            "print([m for m in ('torch', 'matplotlib', 'pygame', 'scipy', 'stable_baselines3') if m in sys.modules])")
+            "print([m for m in ('torch', 'matplotlib', 'pygame', 'scipy', 'stable_baselines3', 'numba') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 

@@ -13,11 +13,13 @@ from penny_env.envs.registration import env_presets
 PRESETS = env_presets()
 
 
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
 @pytest.mark.parametrize("env_id", list(PRESETS))
-def test_equivalence_with_single_env(env_id):
+def test_equivalence_with_single_env(env_id, backend):
     kw = PRESETS[env_id]
     N, T = 5, 500
-    venv = PennyVectorEnv(N, max_episode_steps=120, **kw)
+    venv = PennyVectorEnv(N, max_episode_steps=120, backend=backend, **kw)
+    assert venv.unwrapped._core.backend == backend
     singles = [PennyEnv(max_episode_steps=120, **kw) for _ in range(N)]
     k = venv.single_action_space.shape[0]
     acts = np.random.default_rng(1).uniform(-1.3, 1.3, size=(T, N, k)).astype(np.float32)

@@ -7,9 +7,11 @@ Measured in one run on this machine:
 * single env through ``gymnasium.make`` (wrappers included): every Penny preset, Pendulum-v1 and
   CartPole-v1; microseconds per step and the ratio to Pendulum-v1 (random actions drawn beforehand,
   resets included);
-* PennyVectorEnv at N = 1, 16, 256, 4096 (``gymnasium.make_vec``, native) against gymnasium's
-  SyncVectorEnv of PennyEnv and CartPole-v1's native vector env, in env-steps per second, and the
-  peak memory per env of PennyVectorEnv (tracemalloc, construction + reset + steps).
+* PennyVectorEnv at N = 1, 16, 256, 4096 (``gymnasium.make_vec``, native; the default backend,
+  compiled with numba where installed, and the numpy backend) against gymnasium's SyncVectorEnv of
+  PennyEnv and CartPole-v1's native vector env, in env-steps per second, and the peak memory per
+  env of PennyVectorEnv (tracemalloc, construction + reset + steps). Each native run is a few
+  hundred steps from reset, so episodes run through their autoresets.
 
 ``--quick`` (used by the tests) runs few steps, N up to 256 and two presets.
 """
@@ -89,7 +91,7 @@ def peak_memory_per_env(env_id: str, n: int, steps: int = 5) -> float:
 
 
 def _steps_for(n: int, quick: bool) -> int:
-    budget = 20_000 if quick else 400_000  # env-steps per measurement
+    budget = 20_000 if quick else 1_200_000  # env-steps per measurement
     return max(3, min(200 if quick else 1000, budget // n))
 
 
@@ -121,20 +123,25 @@ def main(argv: list[str] | None = None) -> str:
         lines.append(f"| {name} | {us:.1f} | {1e6 / us:,.0f} | {us / pend:.2f} | {imp:.3f} |")
         print(f"single {name:28s} {us:7.1f} us/step  x{us / pend:.2f} Pendulum  impacts/step {imp:.3f}", flush=True)
     sizes = (1, 16, 256) if quick else (1, 16, 256, 4096)
+    backend = gym.make_vec(WALLED, num_envs=1).unwrapped._core.backend
     presets = (WALLED, "PennyReach-Plane-v0") if quick else VECTOR_PRESETS
     lines += ["", "## Vector environments (env-steps per second, random actions)", "",
-              "| env | N | PennyVectorEnv | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
-              "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+              f"PennyVectorEnv's default backend here: **{backend}**.", "",
+              "| env | N | PennyVectorEnv | numpy backend | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for env_id in presets:
         for n in sizes:
             steps = _steps_for(n, quick)
             native = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k), n, steps)
+            numpy_rate = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, backend="numpy"), n,
+                                     max(3, steps // 4) if n >= 256 else steps)
             sync_steps = max(3, min(steps, (2_000 if quick else 40_000) // n))
             sync = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, vectorization_mode="sync"), n, sync_steps)
             cp = vector_rate(lambda k: gym.make_vec("CartPole-v1", num_envs=k, vectorization_mode="vector_entry_point"), n, steps)
             mem = peak_memory_per_env(env_id, n)
-            lines.append(f"| {env_id} | {n} | {native:,.0f} | {sync:,.0f} | {native / sync:.1f} | {cp:,.0f} | {mem / 1024:.1f} KiB |")
-            print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
+            lines.append(f"| {env_id} | {n} | {native:,.0f} | {numpy_rate:,.0f} | {sync:,.0f} | {native / sync:.1f} | {cp:,.0f} "
+                         f"| {mem / 1024:.1f} KiB |")
+            print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  numpy {numpy_rate:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
                   f"  CartPole {cp:12,.0f}/s  mem/env {mem / 1024:.1f} KiB", flush=True)
     report = "\n".join(lines) + "\n"
     if args.readme:

@@ -1,0 +1,116 @@
+"""The compiled backend (numba) runs physics/scalar.py's functions: it must give the numpy batch's
+and the plain-Python loop's results bitwise, impacts included, and refuse what it cannot compile."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings as hsettings, strategies as st
+
+import penny_env as pe
+from penny_env import PennyVectorEnv
+from penny_env.physics import advance, flow
+from penny_env.physics.compiled import IMPACT_CAPACITY, CompiledBatch, available, compiled_functions
+from penny_env.physics.kernels import SMALL_ANGLE, cis_small
+from penny_env.physics.laws import make_law
+from penny_env.physics.params import SolverSettings
+from penny_env.physics.scalar import advance1, flow1
+from conftest import random_inside_state
+
+pytestmark = pytest.mark.skipif(not available(), reason="numba is not installed")
+
+TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011), pe.Stadium(0.05, 0.0)]
+LAWS = ["elastic", "plastic", 0.4]
+SET = SolverSettings()
+
+
+@hsettings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
+       steer=st.booleans(), dt=st.sampled_from([0.05, 0.5, 3.0]))
+def test_compiled_equals_numpy_batch_and_scalar(seed, table, law, steer, dt):
+    rng = np.random.default_rng(seed)
+    params = pe.PennyParams()
+    law = make_law(law)
+    n = 6
+    S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
+    acc1 = rng.normal(0, 3, n) * steer
+    acc2 = rng.normal(0, 3, n)
+    ref, log, _ = advance(S, acc1, acc2, dt, params, table, law, SET)
+    trig = np.empty((4, n))
+    out, clog = CompiledBatch(params, table, law, SET).advance(S, acc1, acc2, dt, trig)
+    assert np.array_equal(out, ref)
+    assert np.array_equal(trig, np.stack([np.cos(ref[2]), np.sin(ref[2]), np.cos(ref[3]), np.sin(ref[3])]))
+    if log.env.size == 0:
+        assert clog is None
+    else:
+        env, times, ends, posts = clog
+        assert np.array_equal(env, log.env) and np.array_equal(times, log.time)
+        assert np.array_equal(ends, log.end) and np.array_equal(posts, log.state)
+    i = int(rng.integers(n))
+    s1, impacts, _, _ = advance1(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, SET)
+    assert np.array_equal(np.array(s1), out[:, i])
+
+
+def test_impact_buffer_overflow_is_complete():
+    # long intervals in a small table: far more impacts per penny than the per-call buffer holds
+    rng = np.random.default_rng(3)
+    params, table, law = pe.PennyParams(), pe.Ellipse(0.03, 0.011), make_law("elastic")
+    S = np.stack([random_inside_state(rng, params, table) for _ in range(5)], axis=1)
+    acc1, acc2 = rng.normal(0, 3, 5), rng.normal(0, 3, 5)
+    ref, log, _ = advance(S, acc1, acc2, 3.0, params, table, law, SET)
+    out, (env, times, ends, posts) = CompiledBatch(params, table, law, SET).advance(S, acc1, acc2, 3.0)
+    assert np.bincount(log.env).max() > IMPACT_CAPACITY
+    assert np.array_equal(out, ref) and np.array_equal(times, log.time) and np.array_equal(posts, log.state)
+
+
+@given(seed=st.integers(0, 2**31 - 1), steer=st.booleans())
+def test_compiled_flow_on_the_plane_equals_numpy(seed, steer):
+    rng = np.random.default_rng(seed)
+    S = rng.normal(size=(6, 7)) * np.array([0.1, 0.1, 1, 3, 20, 10])[:, None]
+    acc1, acc2 = rng.normal(0, 10, 7) * steer, rng.normal(0, 40, 7)
+    out, log = CompiledBatch(pe.PennyParams(), None, make_law("elastic"), SET).advance(S, acc1, acc2, 0.37)
+    assert log is None
+    assert np.array_equal(out, flow(S, acc1, acc2, 0.37, 0.01))
+    fns = compiled_functions()
+    assert fns["flow1"](tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01) == flow1(tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01)
+
+
+@given(z=st.floats(-SMALL_ANGLE, SMALL_ANGLE))
+def test_small_angle_polynomials_match_libm(z):
+    c, s = cis_small(z, pe.physics.kernels.SCALAR)
+    assert abs(c - math.cos(z)) <= 2.3e-16 and abs(s - math.sin(z)) <= 2 * math.ulp(max(abs(z), 1e-300)) + 1e-300
+    arr = np.array([z, -z, 0.5 * z])
+    ca, sa = cis_small(arr)
+    assert ca[0] == c and sa[0] == s  # numpy and floats: the same operations
+
+
+def test_backend_choice_and_errors():
+    v = PennyVectorEnv(3, backend="auto")
+    assert v._core.backend == "numba"
+    with pytest.raises(ValueError, match="backend"):
+        PennyVectorEnv(3, backend="cuda")
+    table = pe.ConvexTable(lambda x, y: (x * x + y * y - 0.01) / 0.2, lambda x, y: (x / 0.1, y / 0.1), grad_bound=1.0,
+                           hessian_bound=10.0, extent=(-0.11, 0.11, -0.11, 0.11))
+    with pytest.raises(ValueError, match="table"):
+        CompiledBatch(pe.PennyParams(), table, make_law("elastic"), SET)
+
+
+@pytest.mark.parametrize("env_id", ["PennyImpacts-Stadium-v0", "PennyPark-Circle-v0", "PennySteer-Plane-v0"])
+def test_vector_backends_agree(env_id):
+    import gymnasium as gym
+    envs = [gym.make_vec(env_id, num_envs=64, backend=b).unwrapped for b in ("numba", "numpy")]
+    obs = [e.reset(seed=7)[0] for e in envs]
+    assert np.array_equal(obs[0], obs[1])
+    acts = np.random.default_rng(0).uniform(-1, 1, (150,) + envs[0].action_space.shape)
+    for a in acts:
+        out = [e.step(a) for e in envs]
+        assert np.array_equal(envs[0].states, envs[1].states)
+        assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+        assert np.array_equal(out[0][4]["impacts"], out[1][4]["impacts"])
+
+
+def test_auto_falls_back_to_numpy_without_numba(monkeypatch):
+    from penny_env.physics import compiled
+    monkeypatch.setattr(compiled, "available", lambda: False)
+    assert PennyVectorEnv(2, backend="auto")._core.backend == "numpy"
+    with pytest.raises(ValueError, match="numba"):
+        PennyVectorEnv(2, backend="numba")
