@@ -90,6 +90,14 @@ def peak_memory_per_env(env_id: str, n: int, steps: int = 5) -> float:
     return peak / n
 
 
+def _numba_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("numba")
+    except Exception:  # not installed
+        return "not installed"
+
+
 def _steps_for(n: int, quick: bool) -> int:
     budget = 20_000 if quick else 1_200_000  # env-steps per measurement
     return max(3, min(200 if quick else 1000, budget // n))
@@ -107,7 +115,8 @@ def main(argv: list[str] | None = None) -> str:
     single_steps = 1000 if quick else 20_000
     lines = ["# Throughput of penny_env", "",
              f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
-             f"- Python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}",
+             f"- Python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
+             f"numba {_numba_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
              f"- command: `python -m penny_env.analysis.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
              "", "## Single environment (gymnasium.make, random actions, resets included)", "",
