@@ -11,7 +11,7 @@ refinements only take steps at least as long as search_step with this bound.
   pennies directly and sends only the others through physics.advance().
 * :class:`ScalarPhysics`: one penny in Python floats. A certified period is one
   physics.scalar.flow1 (bitwise equal to flow.flow); any other period goes to the physics' scalar
-  event loop physics.scalar.advance1 (bitwise equal to the batched advance(),
+  event loop physics.scalar.advance_m (bitwise equal to the batched advance(),
   tests/test_scalar_batch.py).
 
 tests/test_fast_path.py checks all of this bitwise on random states.

@@ -20,9 +20,10 @@ class PennyVectorEnv(VectorEnv):
     Same scenes, tasks, spaces, rewards and episode logic as PennyEnv (the spaces, rewards and
     observation layout are tabled in its docstring); ``single_action_space`` and
     ``single_observation_space`` are PennyEnv's, the batched spaces add a leading num_envs axis.
-    States live in one (6, num_envs) array; a step is a handful of array operations over all envs
-    with masks (no Python loop over envs): the pennies whose certified first search step excludes
-    an impact are flowed in closed form, the others go through ``physics.advance``.
+    States live in one (6, num_envs) array; no step loops over envs in Python. With the numba
+    backend one compiled call advances every penny in parallel (physics/compiled.py); with the
+    numpy backend the pennies whose certified first search step excludes an impact are flowed
+    directly and the others go through ``physics.advance`` (masks over arrays).
 
     Equivalence: sub-env i seeded with seed + i follows the trajectory of PennyEnv seeded with
     seed + i under the same actions, episode after episode (bitwise in practice; tested to 1e-12).

@@ -385,13 +385,6 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
 
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------
-def first_impact1(s0, acc1, acc2, horizon, params, table, settings):
-    """(t_hit, end) as events.first_impact for one penny."""
-    from .laws import make_law
-
-    return first_impact_m(tuple(s0), acc1, acc2, horizon, scalar_model(params, table, make_law("elastic"), settings))
-
-
 def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
     """One penny over one control interval (see advance.advance).
 
