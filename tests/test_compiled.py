@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from gymnasium.vector import AutoresetMode
 from hypothesis import given, settings as hsettings, strategies as st
 
 import penny_env as pe
@@ -94,18 +95,56 @@ def test_backend_choice_and_errors():
         CompiledBatch(pe.PennyParams(), table, make_law("elastic"), SET)
 
 
+def _assert_steps_agree(a, b, t):
+    """Two vector-env step results equal: obs, rewards, flags and every info entry under its mask."""
+    for x, y in zip(a[:4], b[:4]):
+        assert np.array_equal(x, y), t
+    ia, ib = a[4], b[4]
+    assert set(ia) == set(ib), (t, set(ia) ^ set(ib))
+    for key in ia:
+        if key.startswith("_"):
+            assert np.array_equal(ia[key], ib[key]), (t, key)
+        elif ia[key].dtype == object:  # final_obs / final_info
+            for i in np.flatnonzero(ia["_" + key]):
+                fa, fb = ia[key][i], ib[key][i]
+                assert np.array_equal(fa, fb) if key == "final_obs" else fa == fb, (t, key)
+        else:
+            m = ia["_" + key]
+            assert ia[key].shape == ib[key].shape, (t, key)
+            assert np.array_equal(ia[key][m], ib[key][m], equal_nan=True), (t, key)
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 @pytest.mark.parametrize("env_id", ["PennyImpacts-Stadium-v0", "PennyPark-Circle-v0", "PennySteer-Plane-v0"])
-def test_vector_backends_agree(env_id):
+def test_vector_backends_agree(env_id, mode):
     import gymnasium as gym
-    envs = [gym.make_vec(env_id, num_envs=64, backend=b).unwrapped for b in ("numba", "numpy")]
+    envs = [gym.make_vec(env_id, num_envs=64, backend=b, autoreset_mode=mode, max_episode_steps=60).unwrapped
+            for b in ("numba", "numpy")]
     obs = [e.reset(seed=7)[0] for e in envs]
     assert np.array_equal(obs[0], obs[1])
-    acts = np.random.default_rng(0).uniform(-1, 1, (150,) + envs[0].action_space.shape)
-    for a in acts:
+    acts = np.random.default_rng(0).uniform(-1.2, 1.2, (150,) + envs[0].action_space.shape)
+    for t, a in enumerate(acts):
         out = [e.step(a) for e in envs]
         assert np.array_equal(envs[0].states, envs[1].states)
-        assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
-        assert np.array_equal(out[0][4]["impacts"], out[1][4]["impacts"])
+        _assert_steps_agree(*out, t)
+
+
+def test_vector_step_collects_more_impacts_than_its_buffer():
+    # a narrow table, long control periods and fast rolling: many impacts per env and step, more
+    # than the compiled step's per-env buffer holds; both backends report every one
+    from penny_env.envs.compiled_step import CompiledStep
+    kw = dict(scene="ellipse", task="impacts", table={"kind": "ellipse", "a": 0.03, "b": 0.011}, control_dt=2.0,
+              init={"theta_dot": [20.0, 40.0], "spawn_fraction": 0.05}, max_episode_steps=20)
+    envs = [PennyVectorEnv(6, backend=b, **kw) for b in ("numba", "numpy")]
+    for e in envs:
+        e.reset(seed=1)
+    acts = np.random.default_rng(2).uniform(-1, 1, (20, 6, 2))
+    most = 0
+    for t, a in enumerate(acts):
+        out = [e.step(a) for e in envs]
+        _assert_steps_agree(*out, t)
+        most = max(most, int(out[0][4]["impacts"].max()))
+    assert most > CompiledStep.IMPACT_CAPACITY
 
 
 def test_auto_falls_back_to_numpy_without_numba(monkeypatch):

@@ -15,7 +15,7 @@ import numpy as np
 from ..physics import SolverSettings, advance, flow
 from .fast_path import ScalarPhysics, certified_free
 from .scene import Scene, Task, ConfigError
-from .tasks import TaskConstants
+from .tasks import task_constants
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
@@ -70,7 +70,7 @@ class Core:
         self.inv_L = 1.0 / self.L
         self.s_W = 1.0 / scene.obs_scale["theta_dot"]
         self.s_w = 1.0 / scene.obs_scale["phi_dot"]
-        self.k = TaskConstants(scene, task, self.L)
+        self.k = task_constants(scene, task, self.L)
         self.impacts = task.kind == "impacts"
         self.obs_dim = 11 if self.impacts else 10
         self.max_steps = task.max_episode_steps
@@ -81,11 +81,7 @@ class Core:
         self.f_spawn = scene.init["spawn_fraction"]
         self.f_target = task.target_fraction * fmax
         self.delta = 0.0 if self.plane else self.settings.contact_tol * self.table.size
-        self.backend = self._backend(backend)
-        self.compiled = None
-        if self.backend == "numba":
-            from ..physics.compiled import CompiledBatch
-            self.compiled = CompiledBatch(p, self.table, self.law, self.settings)
+        self.backend = self._backend(backend)  # the vector env's: "numba" steps with envs/compiled_step.py
 
     def _backend(self, backend):
         """'numba' or 'numpy' for the batched step; 'auto' takes numba where it is installed and the
@@ -209,22 +205,13 @@ class Core:
         return np.sqrt(dx * dx + dy * dy)
 
     # -- physics ---------------------------------------------------------------------------
-    def advance(self, S, acc1, acc2, trig_out=None):
-        """(new S, log arrays (env, time, end, state (k, 6))) over one control period, batched.
+    def advance(self, S, acc1, acc2):
+        """(new S, log arrays (env, time, end, state (k, 6)) or None) over one control period,
+        batched with numpy (the vector env's numpy backend).
 
         The open plane is one closed-form (or quadrature) flow. With walls, the pennies whose first
         certified search step excludes an impact are flowed directly (what advance() would do),
-        the others go through physics.advance(). The numba backend runs the physics' scalar loop,
-        compiled, over all pennies (physics/compiled.py): the same operations, penny by penny.
-        trig_out: optional (4, N) array that receives angle_trig(new S)."""
-        if self.compiled is not None:
-            return self.compiled.advance(S, acc1, acc2, self.dt, trig_out)
-        S, log = self._advance_numpy(S, acc1, acc2)
-        if trig_out is not None:
-            trig_out[:] = self.angle_trig(S)
-        return S, log
-
-    def _advance_numpy(self, S, acc1, acc2):
+        the others go through physics.advance()."""
         if self.plane:
             return flow(S, acc1, acc2, self.dt, self.R), None
         free = certified_free(S, acc1, acc2, self.dt, self.params, self.table, self.settings)

@@ -13,7 +13,8 @@ from ..physics import advance as _advance_batch
 from ..physics.validation import as_state, check_inside
 from .core import Core, seed_keys
 from .scene import resolve
-from .tasks import reward1, on_arc1
+from ..physics.kernels import SCALAR
+from .tasks import on_arc, step_reward
 
 
 class PennyEnv(gym.Env):
@@ -228,7 +229,7 @@ class PennyEnv(gym.Env):
             cb, sb = self._arc
             for _, end, post in events:
                 sR = end * R
-                if on_arc1(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), cb, sb, k):
+                if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), cb, sb, k, SCALAR):
                     n_arc += 1
             times = tuple(e[0] for e in events)
             ends = tuple(e[1] for e in events)
@@ -238,7 +239,7 @@ class PennyEnv(gym.Env):
         x, y = s[0], s[1]
         dx, dy = self._target[0] - x, self._target[1] - y
         d = math.sqrt(dx * dx + dy * dy)
-        reward, success = reward1(c.k, self._d, d, s[4], ctrl, n_arc, self._count)
+        reward, success = step_reward(c.k, self._d, d, s[4], ctrl, n_arc, self._count, SCALAR)
         self._d = d
         self._steps += 1
         self._t += c.dt

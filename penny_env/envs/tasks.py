@@ -1,5 +1,6 @@
-"""Rewards and termination of the tasks, written twice with the same formulas in the same order:
-batched over (N,) numpy arrays (PennyVectorEnv) and for Python floats (PennyEnv's fast path).
+"""Rewards and termination of the tasks, written once for (N,) numpy arrays (PennyVectorEnv's
+numpy backend), Python floats (PennyEnv) and compiled code (the vector env's numba backend), in
+the style of physics/kernels.py: the math namespace ``xp`` comes last.
 
 Notation: d = |target - contact point| [m], d_prev its value before the step, L the scene's
 length scale, v = |R theta_dot| the rolling speed [m/s], a the clipped action in [-1, 1]^k,
@@ -21,67 +22,53 @@ episode); with arc_half_width >= pi every impact counts.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
-import numpy as np
+from ..physics.kernels import ARRAY
 
 REACH, PARK, IMPACTS = 0, 1, 2
 KIND_CODE = {"reach": REACH, "park": PARK, "impacts": IMPACTS}
 
 
-class TaskConstants:
-    """The floats the formulas need, taken once from (Scene, Task)."""
+class TaskConstants(NamedTuple):
+    """The numbers the formulas need, taken once from (Scene, Task) by :func:`task_constants`
+    (plain numbers, so compiled code takes them too)."""
 
-    def __init__(self, scene, task, L):
-        self.kind = KIND_CODE[task.kind]
-        self.L = float(L)
-        self.tol = task.tolerance
-        self.tol2 = 2.0 * task.tolerance
-        self.vtol = task.speed_tolerance
-        self.pw = task.progress_weight
-        self.sc = task.speed_cost
-        self.cc = task.ctrl_cost
-        self.bonus = task.success_bonus
-        self.ir = task.impact_reward
-        self.goal = task.impacts_goal
-        self.R = scene.params["R"]
-        self.v_ref = self.R * scene.obs_scale["theta_dot"]
-        self.all_arc = task.arc_half_width >= math.pi
-        self.cos_hw = math.cos(min(task.arc_half_width, math.pi))
-
-
-# -- batched --------------------------------------------------------------------------------
-def on_arc(px, py, cb, sb, k: TaskConstants):
-    """Boolean array: impact points (px, py) on the arc centred on direction (cb, sb)."""
-    if k.all_arc:
-        return np.ones(np.shape(px), dtype=bool)
-    return px * cb + py * sb >= k.cos_hw * np.sqrt(px * px + py * py)
+    kind: int
+    L: float
+    tol: float
+    tol2: float
+    vtol: float
+    pw: float
+    sc: float
+    cc: float
+    bonus: float
+    ir: float
+    goal: int
+    R: float
+    v_ref: float
+    all_arc: bool
+    cos_hw: float
 
 
-def reward_batch(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count):
-    """(reward, success) arrays."""
-    if k.kind == IMPACTS:
-        success = count >= k.goal
-        r = k.ir * n_arc - k.cc * ctrl + k.bonus * success
-        return r, success
-    progress = k.pw * (d_prev - d) / k.L
-    if k.kind == REACH:
-        success = d < k.tol
-        return progress - k.cc * ctrl + k.bonus * success, success
-    v = np.abs(k.R * W)
-    success = (d < k.tol) & (v < k.vtol)
-    r = progress - k.sc * (v / k.v_ref) * (d < k.tol2) - k.cc * ctrl + k.bonus * success
-    return r, success
+def task_constants(scene, task, L) -> TaskConstants:
+    return TaskConstants(
+        kind=KIND_CODE[task.kind], L=float(L), tol=float(task.tolerance), tol2=2.0 * task.tolerance,
+        vtol=float(task.speed_tolerance), pw=float(task.progress_weight), sc=float(task.speed_cost),
+        cc=float(task.ctrl_cost), bonus=float(task.success_bonus), ir=float(task.impact_reward),
+        goal=int(task.impacts_goal), R=float(scene.params["R"]), v_ref=scene.params["R"] * scene.obs_scale["theta_dot"],
+        all_arc=bool(task.arc_half_width >= math.pi), cos_hw=math.cos(min(task.arc_half_width, math.pi)))
 
 
-# -- scalar ---------------------------------------------------------------------------------
-def on_arc1(px, py, cb, sb, k: TaskConstants) -> bool:
-    if k.all_arc:
-        return True
-    return px * cb + py * sb >= k.cos_hw * math.sqrt(px * px + py * py)
+def on_arc(px, py, cb, sb, k: TaskConstants, xp=ARRAY):
+    """Impact points (px, py) on the arc centred on direction (cb, sb) (a bool, or a bool array)."""
+    if k.all_arc:  # every impact point counts (they are finite), as a bool of px's shape
+        return xp.abs(px) < xp.inf
+    return px * cb + py * sb >= k.cos_hw * xp.sqrt(px * px + py * py)
 
 
-def reward1(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count):
-    """(reward, success) for one env, the same formulas as :func:`reward_batch`."""
+def step_reward(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count, xp=ARRAY):
+    """(reward, success) of one step (floats, or arrays over envs)."""
     if k.kind == IMPACTS:
         success = count >= k.goal
         return k.ir * n_arc - k.cc * ctrl + k.bonus * success, success
@@ -89,7 +76,7 @@ def reward1(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count):
     if k.kind == REACH:
         success = d < k.tol
         return progress - k.cc * ctrl + k.bonus * success, success
-    v = abs(k.R * W)
-    success = d < k.tol and v < k.vtol
+    v = xp.abs(k.R * W)
+    success = (d < k.tol) & (v < k.vtol)
     r = progress - k.sc * (v / k.v_ref) * (d < k.tol2) - k.cc * ctrl + k.bonus * success
     return r, success

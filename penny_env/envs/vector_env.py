@@ -11,7 +11,7 @@ from gymnasium.vector.utils import batch_space
 from ..physics import kinetic_energy
 from .core import Core, seed_keys, X, Y, PHI, THETA_DOT
 from .scene import resolve
-from .tasks import on_arc, reward_batch
+from .tasks import on_arc, step_reward
 
 
 class PennyVectorEnv(VectorEnv):
@@ -75,7 +75,7 @@ class PennyVectorEnv(VectorEnv):
         self._setup()
 
     def _setup(self):
-        c = self._core = Core(self.scene, self.task, backend=self.backend)
+        c = self._core = self._make_core()
         n = self.num_envs
         self.single_action_space = spaces.Box(-1.0, 1.0, (c.n_act,), np.float32)
         lo, hi = c.obs_bounds()
@@ -91,12 +91,21 @@ class PennyVectorEnv(VectorEnv):
     def __getstate__(self):
         state = self.__dict__.copy()
         state.pop("_core")
+        state.pop("_compiled")
         state["_renderers"] = None
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        self._core = Core(self.scene, self.task, backend=self.backend)
+        self._core = self._make_core()
+
+    def _make_core(self):
+        core = Core(self.scene, self.task, backend=self.backend)
+        self._compiled = None
+        if core.backend == "numba":
+            from .compiled_step import CompiledStep
+            self._compiled = CompiledStep(core)
+        return core
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -148,7 +157,7 @@ class PennyVectorEnv(VectorEnv):
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         self._reset_envs(mask)
         self._autoreset = np.zeros(n, dtype=bool)
-        obs = self._core.observe(self._S, self._target, self._count, self._trig)
+        obs = self._observe()
         info = {"kinetic_energy": kinetic_energy(self._S, self._core.params), "_kinetic_energy": self._true.copy(),
                 "time": self._t.copy(), "_time": self._true.copy(), "distance": self._d.copy(), "_distance": self._true.copy()}
         return obs, info
@@ -172,7 +181,16 @@ class PennyVectorEnv(VectorEnv):
             for i in idx:
                 self._trails[i] = [(self._S[X, i], self._S[Y, i])]
 
-    def _actions(self, actions):
+    def _observe(self):
+        """Observations of every env (the compiled backend also refreshes the angle trig)."""
+        if self._compiled is None:
+            return self._core.observe(self._S, self._target, self._count, self._trig)
+        obs = np.empty((self.num_envs, self._core.obs_dim), dtype=np.float32)
+        self._compiled.observe_rows(np.arange(self.num_envs), self._S, self._trig, self._target, self._count, obs)
+        return obs
+
+    def _actions(self, actions, clip=True):
+        """(num_envs, n_act) float64 actions, checked (shape, finite) and clipped to [-1, 1]."""
         c = self._core
         try:
             a = np.asarray(actions, dtype=np.float64)
@@ -187,11 +205,13 @@ class PennyVectorEnv(VectorEnv):
         if not finite.all():
             bad = np.flatnonzero(~finite.all(axis=1))
             raise ValueError(f"non-finite action in sub-env(s) {bad[:10].tolist()}{' ...' if bad.size > 10 else ''}")
-        return np.clip(a, -1.0, 1.0)
+        return np.clip(a, -1.0, 1.0) if clip else np.ascontiguousarray(a)
 
     def step(self, actions):
         if self._S is None:
             raise ResetNeeded("PennyVectorEnv.step() called before reset()")
+        if self._compiled is not None:
+            return self._step_compiled(actions)
         c = self._core
         n = self.num_envs
         a = self._actions(actions)
@@ -200,7 +220,8 @@ class PennyVectorEnv(VectorEnv):
             ctrl = (a[:, 0] * a[:, 0] + a[:, 1] * a[:, 1]) / 2
         else:
             ctrl = (a[:, 0] * a[:, 0]) / 1
-        S, log = c.advance(self._S, acc1, acc2, self._trig)
+        S, log = c.advance(self._S, acc1, acc2)
+        self._trig = c.angle_trig(S)
         reset_now = self._autoreset  # NEXT_STEP: envs whose episode ended at the previous step
         self._S = S
         if log is not None:
@@ -216,17 +237,14 @@ class PennyVectorEnv(VectorEnv):
             n_arc = counts
         self._count = self._count + n_arc
         d = c.distance(S, self._target)
-        reward, success = reward_batch(c.k, self._d, d, S[THETA_DOT], ctrl, n_arc, self._count)
+        reward, success = step_reward(c.k, self._d, d, S[THETA_DOT], ctrl, n_arc, self._count)
         self._d = d
         self._steps += 1
         self._t = self._t + c.dt
         terminated = np.asarray(success, dtype=bool)
         truncated = self._steps >= c.max_steps
-        info = self._info(counts, log, S)
-        if self._trails is not None:
-            for i in range(n):
-                self._trails[i].append((S[X, i], S[Y, i]))
-                del self._trails[i][:-200]
+        info = self._info(counts, *self._impact_arrays(counts, log), kinetic_energy(S, c.params))
+        self._extend_trails()
         done = terminated | truncated
         if done.any():
             info["is_success"] = terminated.copy()
@@ -258,33 +276,72 @@ class PennyVectorEnv(VectorEnv):
                 obs = c.observe(self._S, self._target, self._count, self._trig)
         return obs, reward.astype(np.float64), terminated, truncated, info
 
-    def _info(self, counts, log, S):
+    def _step_compiled(self, actions):
+        """step() with the numba backend: one compiled pass (envs/compiled_step.py) over the envs."""
         c = self._core
         n = self.num_envs
-        t = self._true
-        info = {"impacts": counts, "_impacts": t.copy()}
+        a = self._actions(actions, clip=False)  # the compiled step clips, as PennyEnv does
+        next_step = self.autoreset_mode == AutoresetMode.NEXT_STEP
+        skip = self._autoreset if next_step else np.zeros(n, dtype=bool)
+        self._S, obs, reward, terminated, truncated, counts, times, ends, ke = self._compiled.step(
+            self._S, self._trig, a, skip, self._target, self._arc, self._count, self._d, self._steps, self._t)
+        self._extend_trails()
+        done = terminated | truncated
+        if next_step:
+            if skip.any():  # NEXT_STEP: the envs whose episode ended at the previous step reset now
+                rows = np.flatnonzero(skip)
+                self._episodes[rows] += np.uint64(1)
+                self._reset_envs(skip)
+                self._compiled.observe_rows(rows, self._S, self._trig, self._target, self._count, obs)
+                ke[rows] = kinetic_energy(self._S[:, rows], c.params)
+            self._autoreset = done
+            info = self._info(counts, times, ends, ke)
+            if done.any():
+                info["is_success"], info["_is_success"] = terminated.copy(), done.copy()
+            return obs, reward, terminated, truncated, info
+        info = self._info(counts, times, ends, ke)
+        if done.any():
+            info["is_success"], info["_is_success"] = terminated.copy(), done.copy()
+            rows = np.flatnonzero(done)
+            final_obs = np.empty(n, dtype=object)
+            final_info = np.empty(n, dtype=object)
+            for i in rows:  # only the envs whose episode ended (SB3-style final observations)
+                final_obs[i] = obs[i].copy()
+                final_info[i] = {"is_success": bool(terminated[i])}
+            info["final_obs"], info["_final_obs"] = final_obs, done.copy()
+            info["final_info"], info["_final_info"] = final_info, done.copy()
+            self._episodes[done] += np.uint64(1)
+            self._reset_envs(done)
+            self._compiled.observe_rows(rows, self._S, self._trig, self._target, self._count, obs)
+        return obs, reward, terminated, truncated, info
+
+    def _extend_trails(self):
+        if self._trails is not None:
+            for i in range(self.num_envs):
+                self._trails[i].append((self._S[X, i], self._S[Y, i]))
+                del self._trails[i][:-200]
+
+    def _impact_arrays(self, counts, log):
+        """(impact_times (N, K) NaN-padded, impact_ends (N, K) 0-padded), K the largest count."""
+        n = self.num_envs
         if log is None:
-            info["impact_times"] = np.zeros((n, 0))
-            info["impact_ends"] = np.zeros((n, 0), dtype=np.int8)
-        else:
-            env, times, ends, _ = log
-            K = int(counts.max())
-            first = np.cumsum(counts) - counts
-            rank = np.arange(env.size) - first[env]
-            it = np.full((n, K), np.nan)
-            ie = np.zeros((n, K), dtype=np.int8)
-            it[env, rank] = times
-            ie[env, rank] = ends
-            info["impact_times"], info["impact_ends"] = it, ie
-        info["_impact_times"] = t.copy()
-        info["_impact_ends"] = t.copy()
-        info["kinetic_energy"] = kinetic_energy(S, c.params)
-        info["_kinetic_energy"] = t.copy()
-        info["time"] = self._t.copy()
-        info["_time"] = t.copy()
-        info["distance"] = self._d.copy()
-        info["_distance"] = t.copy()
-        if c.impacts:
+            return np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int8)
+        env, times, ends, _ = log
+        K = int(counts.max())
+        first = np.cumsum(counts) - counts
+        rank = np.arange(env.size) - first[env]
+        it = np.full((n, K), np.nan)
+        ie = np.zeros((n, K), dtype=np.int8)
+        it[env, rank] = times
+        ie[env, rank] = ends
+        return it, ie
+
+    def _info(self, counts, times, ends, ke):
+        t = self._true
+        info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
+                "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": ke, "_kinetic_energy": t.copy(),
+                "time": self._t.copy(), "_time": t.copy(), "distance": self._d.copy(), "_distance": t.copy()}
+        if self._core.impacts:
             info["arc_impacts"] = self._count.copy()
             info["_arc_impacts"] = t.copy()
         return info
@@ -293,6 +350,9 @@ class PennyVectorEnv(VectorEnv):
         """NEXT_STEP: the resetting envs report their reset values."""
         info["impacts"] = np.where(mask, 0, info["impacts"])
         if info["impact_times"].shape[1]:
+            K = int(info["impacts"].max())  # the largest count among the envs that did step
+            info["impact_times"] = info["impact_times"][:, :K].copy()
+            info["impact_ends"] = info["impact_ends"][:, :K].copy()
             info["impact_times"][mask] = np.nan
             info["impact_ends"][mask] = 0
         info["kinetic_energy"][mask] = kinetic_energy(self._S[:, mask], self._core.params)

@@ -21,6 +21,7 @@ import importlib
 import importlib.util
 import math
 import types
+from pathlib import Path
 
 import numpy as np
 
@@ -42,14 +43,14 @@ def _other_table(m, x, y):
     return np.nan, np.nan, np.nan
 
 
-def _drop_stale_cache(modules) -> None:
+def drop_stale_cache(folder, modules) -> None:
     """numba checks a cached function against its own file only, while these functions also
-    freeze constants of the other physics modules (quadrature rules, table kinds): drop the
-    package's cached machine code when any of the modules changed since it was written."""
-    from pathlib import Path
+    freeze constants and functions of other modules (quadrature rules, table kinds, the physics
+    called by the environment's kernel): drop the cached machine code in ``folder`` when any of
+    ``modules`` changed since it was written."""
     import hashlib
 
-    folder = Path(__file__).with_name("__pycache__")
+    folder = Path(folder)
     digest = hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in modules)).hexdigest()
     stamp = folder / "penny_env_numba.stamp"
     try:
@@ -63,6 +64,23 @@ def _drop_stale_cache(modules) -> None:
         pass
 
 
+def physics_modules() -> tuple:
+    """The modules whose functions compiled code copies (see :func:`compiled_functions`)."""
+    from . import kernels, numba_math, scalar
+    return (kernels, importlib.import_module(".flow", __package__), scalar, numba_math, importlib.import_module(__name__))
+
+
+def jit_copy(f, namespace, jit):
+    """``jit`` of a copy of function f whose globals are ``namespace`` (where the math namespaces
+    are physics/numba_math.py); default arguments that are modules (``xp``) become numba_math too."""
+    from . import numba_math
+
+    defaults = tuple(numba_math if isinstance(d, types.ModuleType) else d for d in (f.__defaults__ or ()))
+    copy = types.FunctionType(f.__code__, namespace, f.__name__, defaults, f.__closure__)
+    copy.__module__, copy.__qualname__ = f.__module__, f.__qualname__
+    return jit(copy)
+
+
 def compiled_functions() -> dict:
     """name -> compiled function, for kernels.py, flow.phase_sweep and scalar.py (compiled once)."""
     global _COMPILED
@@ -74,7 +92,7 @@ def compiled_functions() -> dict:
         raise ImportError('the compiled backend needs numba: pip install "penny_env[fast]"') from None
     from . import kernels, numba_math, scalar
     flow = importlib.import_module(".flow", __package__)  # the module (the package exports the function flow)
-    _drop_stale_cache((kernels, flow, scalar, numba_math, importlib.import_module(__name__)))
+    drop_stale_cache(Path(__file__).with_name("__pycache__"), physics_modules())
 
     jit = numba.njit(cache=True)
     namespace = {"__builtins__": builtins}
@@ -89,10 +107,7 @@ def compiled_functions() -> dict:
                if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
     sources.append(flow.phase_sweep)
     for f in sources:
-        defaults = tuple(numba_math if isinstance(d, types.ModuleType) else d for d in (f.__defaults__ or ()))
-        copy = types.FunctionType(f.__code__, namespace, f.__name__, defaults, f.__closure__)
-        copy.__module__, copy.__qualname__ = f.__module__, f.__qualname__
-        namespace[f.__name__] = jit(copy)
+        namespace[f.__name__] = jit_copy(f, namespace, jit)
     namespace["other_terms"] = namespace["other_hess"] = jit(_other_table)
     fns = {f.__name__: namespace[f.__name__] for f in sources}
     free1, flow1, advance_m = fns["certified_free1"], fns["flow1"], fns["advance_m"]

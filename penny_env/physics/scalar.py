@@ -226,10 +226,15 @@ def with_curvature1(end, c, sn, W, w, sigma, acc1, acc2, m, M, K, V2, rem):
 def certified_free1(s, acc1, acc2, dt, m):
     """The first step of the impact search from t = 0 finds no end touching the wall and certifies
     the whole period [0, dt], so the period has no impact and advance() returns flow(s, dt)."""
+    return certified_free_trig(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, dt, m)
+
+
+def certified_free_trig(s, c, sn, acc1, acc2, dt, m):
+    """:func:`certified_free1` given c, sn = math.cos, math.sin of the heading s[3] (which the
+    vector env keeps from the previous step for its observations)."""
     R = m.R
     delta = m.delta
-    x, y, _, ph, W, w = s
-    c, sn = math.cos(ph), math.sin(ph)
+    x, y, _, _, W, w = s
     M = acceleration_bound(W, W + acc2 * dt, w, w + acc1 * dt, acc1, acc2, R, m.G, m.L, SCALAR)
     RW = R * W
     tau = math.inf
