@@ -78,8 +78,94 @@ def _observe_into(obs, i, s, trig, target, count, p):
         obs[i, 10] = min(count / p.goal, 1.0)
 
 
+def _step_env(i, S, trig, actions, p, m, k, target, arc, count, dist, steps, time,
+              S_out, obs, rew, term, trunc, n_imp, times, ends, ke, acc):
+    """PennyEnv.step for env i (compiled only: its callees are the compiled copies)."""
+    a0 = clip(actions[i, 0])  # noqa: F821  (names of the compiled namespace, see compiled_env_functions)
+    if p.n_act == 2:
+        a1 = clip(actions[i, 1])  # noqa: F821
+        acc1, acc2 = a0 * p.gain1, a1 * p.gain2
+        ctrl = (a0 * a0 + a1 * a1) / 2
+    else:
+        acc1, acc2 = (a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2)
+        ctrl = (a0 * a0) / 1
+    acc[0, i] = acc1
+    acc[1, i] = acc2
+    s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+    n_arc = 0
+    n = 0
+    if p.plane or certified_free_trig(s, trig[2, i], trig[3, i], acc1, acc2, p.dt, m):  # noqa: F821
+        s1 = flow1(s, acc1, acc2, p.dt, m.R)  # noqa: F821
+    else:
+        s1, impacts, _, _ = advance_m(s, acc1, acc2, p.dt, m, 0)  # noqa: F821
+        n = len(impacts)
+        for j in range(n):
+            t_j, end, post = impacts[j]
+            sR = end * m.R
+            if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]),  # noqa: F821
+                      arc[0, i], arc[1, i], k, numba_math):  # noqa: F821
+                n_arc += 1
+            if j < times.shape[1]:
+                times[i, j] = t_j
+                ends[i, j] = end
+    n_imp[i] = n
+    count[i] += n_arc
+    dx, dy = target[0, i] - s1[0], target[1, i] - s1[1]
+    d = math.sqrt(dx * dx + dy * dy)
+    r, success = step_reward(k, dist[i], d, s1[4], ctrl, n_arc, count[i], numba_math)  # noqa: F821
+    dist[i] = d
+    steps[i] += 1
+    time[i] += p.dt
+    rew[i] = r
+    term[i] = success
+    trunc[i] = steps[i] >= p.max_steps
+    ke[i] = 0.5 * (p.Itot * s1[4] ** 2 + p.J * s1[5] ** 2)
+    for row in range(6):
+        S_out[row, i] = s1[row]
+    trig[0, i] = math.cos(s1[2])
+    trig[1, i] = math.sin(s1[2])
+    trig[2, i] = math.cos(s1[3])
+    trig[3, i] = math.sin(s1[3])
+    observe_into(obs, i, s1, trig, target, count[i], p)  # noqa: F821
+
+
+def _step_envs(S, trig, actions, skip, p, m, k, target, arc, count, dist, steps, time,
+               S_out, obs, rew, term, trunc, n_imp, times, ends, ke, acc):
+    """_step_env over every env not in skip, in parallel (compiled only)."""
+    for i in prange(S.shape[1]):  # noqa: F821
+        for j in range(times.shape[1]):
+            times[i, j] = np.nan
+            ends[i, j] = 0
+        if skip[i]:  # reset at this step (NEXT_STEP): the caller fills its outputs
+            for row in range(6):
+                S_out[row, i] = S[row, i]
+            rew[i] = 0.0
+            term[i] = False
+            trunc[i] = False
+            n_imp[i] = 0
+            acc[0, i] = acc[1, i] = 0.0
+            continue
+        step_env(i, S, trig, actions, p, m, k, target, arc, count, dist, steps, time,  # noqa: F821
+                 S_out, obs, rew, term, trunc, n_imp, times, ends, ke, acc)
+
+
+def _observe_rows(rows, S, trig, target, count, p, obs):
+    """trig and obs of the envs in rows (after a reset; compiled only)."""
+    for i in rows:
+        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+        trig[0, i] = math.cos(s[2])
+        trig[1, i] = math.sin(s[2])
+        trig[2, i] = math.cos(s[3])
+        trig[3, i] = math.sin(s[3])
+        observe_into(obs, i, s, trig, target, count[i], p)  # noqa: F821
+
+
 def compiled_env_functions() -> dict:
-    """The compiled step and observation functions (compiled once per process, cached on disk)."""
+    """The compiled step and observation functions (compiled once per process, cached on disk).
+
+    Like physics/compiled.py, the functions above are compiled as copies whose globals hold the
+    compiled physics and task functions (closures over compiled functions would miss numba's
+    on-disk cache in every new process)."""
     global _COMPILED
     if _COMPILED is not None:
         return _COMPILED
@@ -92,96 +178,19 @@ def compiled_env_functions() -> dict:
     compiled.drop_stale_cache(Path(__file__).with_name("__pycache__"),
                               compiled.physics_modules() + (tasks, compiled_step))
     jit = numba.njit(cache=True)
-    namespace = {"__builtins__": builtins, "math": math, "ARRAY": numba_math}
-    on_arc = compiled.jit_copy(tasks.on_arc, dict(vars(tasks), **namespace), jit)
-    step_reward = compiled.jit_copy(tasks.step_reward, dict(vars(tasks), **namespace), jit)
-    clip = jit(_clip)
-    observe_into = jit(_observe_into)
-    free, flow1, advance_m = phys["certified_free_trig"], phys["flow1"], phys["advance_m"]
-    xp = numba_math
-
-    @numba.njit(cache=True, inline="always")
-    def step_env(i, S, trig, actions, p, m, k, target, arc, count, dist, steps, time,
-                 S_out, obs, rew, term, trunc, n_imp, times, ends, ke, acc):
-        """PennyEnv.step for env i."""
-        a0 = clip(actions[i, 0])
-        if p.n_act == 2:
-            a1 = clip(actions[i, 1])
-            acc1, acc2 = a0 * p.gain1, a1 * p.gain2
-            ctrl = (a0 * a0 + a1 * a1) / 2
-        else:
-            acc1, acc2 = (a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2)
-            ctrl = (a0 * a0) / 1
-        acc[0, i] = acc1
-        acc[1, i] = acc2
-        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-        n_arc = 0
-        n = 0
-        if p.plane or free(s, trig[2, i], trig[3, i], acc1, acc2, p.dt, m):
-            s1 = flow1(s, acc1, acc2, p.dt, m.R)
-        else:
-            s1, impacts, _, _ = advance_m(s, acc1, acc2, p.dt, m, 0)
-            n = len(impacts)
-            for j in range(n):
-                t_j, end, post = impacts[j]
-                sR = end * m.R
-                if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]),
-                          arc[0, i], arc[1, i], k, xp):
-                    n_arc += 1
-                if j < times.shape[1]:
-                    times[i, j] = t_j
-                    ends[i, j] = end
-        n_imp[i] = n
-        count[i] += n_arc
-        dx, dy = target[0, i] - s1[0], target[1, i] - s1[1]
-        d = math.sqrt(dx * dx + dy * dy)
-        r, success = step_reward(k, dist[i], d, s1[4], ctrl, n_arc, count[i], xp)
-        dist[i] = d
-        steps[i] += 1
-        time[i] += p.dt
-        rew[i] = r
-        term[i] = success
-        trunc[i] = steps[i] >= p.max_steps
-        ke[i] = 0.5 * (p.Itot * s1[4] ** 2 + p.J * s1[5] ** 2)
-        for r_ in range(6):
-            S_out[r_, i] = s1[r_]
-        trig[0, i] = math.cos(s1[2])
-        trig[1, i] = math.sin(s1[2])
-        trig[2, i] = math.cos(s1[3])
-        trig[3, i] = math.sin(s1[3])
-        observe_into(obs, i, s1, trig, target, count[i], p)
-
-    @numba.njit(parallel=True, cache=True)
-    def step_envs(S, trig, actions, skip, p, m, k, target, arc, count, dist, steps, time,
-                  S_out, obs, rew, term, trunc, n_imp, times, ends, ke, acc):
-        for i in numba.prange(S.shape[1]):
-            for j in range(times.shape[1]):
-                times[i, j] = np.nan
-                ends[i, j] = 0
-            if skip[i]:  # reset at this step (NEXT_STEP): the caller fills its outputs
-                for r in range(6):
-                    S_out[r, i] = S[r, i]
-                rew[i] = 0.0
-                term[i] = False
-                trunc[i] = False
-                n_imp[i] = 0
-                acc[0, i] = acc[1, i] = 0.0
-                continue
-            step_env(i, S, trig, actions, p, m, k, target, arc, count, dist, steps, time,
-                     S_out, obs, rew, term, trunc, n_imp, times, ends, ke, acc)
-
-    @numba.njit(cache=True)
-    def observe_rows(rows, S, trig, target, count, p, obs):
-        """trig and obs of the envs in rows (after a reset)."""
-        for i in rows:
-            s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-            trig[0, i] = math.cos(s[2])
-            trig[1, i] = math.sin(s[2])
-            trig[2, i] = math.cos(s[3])
-            trig[3, i] = math.sin(s[3])
-            observe_into(obs, i, s, trig, target, count[i], p)
-
-    _COMPILED = {"step_envs": step_envs, "observe_rows": observe_rows, "advance_m": advance_m}
+    namespace = dict(vars(tasks), __builtins__=builtins, math=math, np=np, ARRAY=numba_math, numba_math=numba_math,
+                     prange=numba.prange)
+    for name in ("certified_free_trig", "flow1", "advance_m"):
+        namespace[name] = phys[name]
+    for f in (tasks.on_arc, tasks.step_reward):
+        namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
+    namespace["clip"] = compiled.jit_copy(_clip, namespace, jit)
+    namespace["observe_into"] = compiled.jit_copy(_observe_into, namespace, jit)
+    # inlined into the loop: called as a function, its two dozen array arguments cost more than its work
+    namespace["step_env"] = compiled.jit_copy(_step_env, namespace, numba.njit(cache=True, inline="always"))
+    _COMPILED = {"step_envs": compiled.jit_copy(_step_envs, namespace, numba.njit(parallel=True, cache=True)),
+                 "observe_rows": compiled.jit_copy(_observe_rows, namespace, jit),
+                 "advance_m": phys["advance_m"]}
     return _COMPILED
 
 

@@ -133,14 +133,18 @@ class Core:
             lo, hi = init[name]
             S[row] = lo + (hi - lo) * u[j]
         b = 2.0 * np.pi * u[7] - np.pi
-        cb, sb = np.cos(b), np.sin(b)
+        arc = np.empty((2, n))
+        cb, sb = np.cos(b, out=arc[0]), np.sin(b, out=arc[1])
+        target = np.empty((2, n))
         if self.impacts:
             rho = self._wall_radius(cb, sb)
-            target = np.stack([rho * cb, rho * sb])
+            np.multiply(rho, cb, out=target[0])
+            np.multiply(rho, sb, out=target[1])
         else:
             rt = self.f_target * np.sqrt(u[6])
-            target = np.stack([rt * self.ax * cb, rt * self.ay * sb])
-        return S, target, np.stack([cb, sb])
+            target[0] = rt * self.ax * cb
+            target[1] = rt * self.ay * sb
+        return S, target, arc
 
     def _wall_radius(self, c, s):
         """Distance from the centre to the wall along (c, s) (ellipse, circle, stadium)."""

@@ -21,21 +21,23 @@ class PennyVectorEnv(VectorEnv):
     observation layout are tabled in its docstring); ``single_action_space`` and
     ``single_observation_space`` are PennyEnv's, the batched spaces add a leading num_envs axis.
     States live in one (6, num_envs) array; no step loops over envs in Python. With the numba
-    backend one compiled call advances every penny in parallel (physics/compiled.py); with the
-    numpy backend the pennies whose certified first search step excludes an impact are flowed
-    directly and the others go through ``physics.advance`` (masks over arrays).
+    backend the whole step (actions, physics, rewards, observations) is one compiled call, parallel
+    over the envs (envs/compiled_step.py); with the numpy backend the pennies whose certified first
+    search step excludes an impact are flowed directly and the others go through
+    ``physics.advance`` (masks over arrays).
 
     Equivalence: sub-env i seeded with seed + i follows the trajectory of PennyEnv seeded with
-    seed + i under the same actions, episode after episode (bitwise in practice; tested to 1e-12).
+    seed + i under the same actions, episode after episode: bitwise with the numba backend;
+    with the numpy backend states and rewards too, observations within a float32 rounding (tested).
 
     ``PennyVectorEnv(num_envs, scene="ellipse", task="reach", max_episode_steps=None,
     autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto", **overrides)``.
 
-    backend: "numba" runs the physics' own scalar event loop compiled and in parallel over the
-    pennies (physics/compiled.py; needs the optional numba, ``pip install "penny_env[fast]"``), "numpy"
-    the array event loop (physics.advance); "auto" (default) takes numba where it is installed and
-    the table compiles (ellipse, circle, stadium, open plane). Both give the single env's
-    trajectories (tested). The first numba step of a fresh install compiles for a few seconds;
+    backend: "numba" runs PennyEnv's step, the physics' own scalar event loop included, compiled
+    and in parallel over the envs (envs/compiled_step.py; needs the optional numba,
+    ``pip install "penny_env[fast]"``), "numpy" the array event loop (physics.advance) and array
+    code; "auto" (default) takes numba where it is installed and the table compiles (ellipse,
+    circle, stadium, open plane). Both give the single env's trajectories (tested). The first numba step of a fresh install compiles for a few seconds;
     later processes load the machine code from numba's cache.
 
     Autoreset: NEXT_STEP (default) - the step after an env's episode ended resets it (its
@@ -169,7 +171,8 @@ class PennyVectorEnv(VectorEnv):
         c = self._core
         S, target, arc = c.sample(self._keys[idx], self._episodes[idx])
         self._S[:, idx] = S
-        self._trig[:, idx] = c.angle_trig(S)
+        if self._compiled is None:  # (the compiled backend's observe_rows fills trig)
+            self._trig[:, idx] = c.angle_trig(S)
         self._target[:, idx] = target
         self._arc[:, idx] = arc
         self._steps[idx] = 0

@@ -110,51 +110,56 @@ def compiled_functions() -> dict:
         namespace[f.__name__] = jit_copy(f, namespace, jit)
     namespace["other_terms"] = namespace["other_hess"] = jit(_other_table)
     fns = {f.__name__: namespace[f.__name__] for f in sources}
-    free1, flow1, advance_m = fns["certified_free1"], fns["flow1"], fns["advance_m"]
-
-    @numba.njit(cache=True)
-    def _angle_trig(s, trig, i):
-        """cos theta, sin theta, cos phi, sin phi of state s into column i of trig (4, N)."""
-        if trig.shape[1] > i:
-            trig[0, i] = math.cos(s[2])
-            trig[1, i] = math.sin(s[2])
-            trig[2, i] = math.cos(s[3])
-            trig[3, i] = math.sin(s[3])
-
-    @numba.njit(parallel=True, cache=True)
-    def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
-        cap = times.shape[1]
-        for i in numba.prange(S.shape[1]):
-            s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-            a1, a2 = acc1[i], acc2[i]
-            k = 0
-            if free1(s, a1, a2, dt, m):
-                s1 = flow1(s, a1, a2, dt, m.R)
-            else:
-                s1, impacts, rests, elapsed = advance_m(s, a1, a2, dt, m, 0)
-                k = len(impacts)
-                for j in range(min(k, cap)):
-                    times[i, j] = impacts[j][0]
-                    ends[i, j] = impacts[j][1]
-                    post = impacts[j][2]
-                    for r in range(6):
-                        posts[i, j, r] = post[r]
-            counts[i] = k
-            for r in range(6):
-                out[r, i] = s1[r]
-            _angle_trig(s1, trig, i)
-
-    @numba.njit(parallel=True, cache=True)
-    def _flow_batch(S, acc1, acc2, dt, R, out, trig):
-        for i in numba.prange(S.shape[1]):
-            s1 = flow1((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), acc1[i], acc2[i], dt, R)
-            for r in range(6):
-                out[r, i] = s1[r]
-            _angle_trig(s1, trig, i)
-
-    fns["_advance_batch"], fns["_flow_batch"] = _advance_batch, _flow_batch
+    # the loops over pennies, compiled as copies too: module-level functions whose callees are
+    # globals of the namespace (closures over dispatchers would miss numba's cache every process)
+    namespace["prange"] = numba.prange
+    namespace["_angle_trig"] = jit_copy(_angle_trig, namespace, jit)
+    parallel = numba.njit(parallel=True, cache=True)
+    for f in (_advance_batch, _flow_batch):
+        fns[f.__name__] = jit_copy(f, namespace, parallel)
     _COMPILED = fns
     return fns
+
+
+# -- the loops over the pennies of a batch (compiled by compiled_functions, never run as Python) --
+def _angle_trig(s, trig, i):
+    """cos theta, sin theta, cos phi, sin phi of state s into column i of trig (4, N)."""
+    if trig.shape[1] > i:
+        trig[0, i] = math.cos(s[2])
+        trig[1, i] = math.sin(s[2])
+        trig[2, i] = math.cos(s[3])
+        trig[3, i] = math.sin(s[3])
+
+
+def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
+    cap = times.shape[1]
+    for i in prange(S.shape[1]):  # noqa: F821  (numba.prange, in the compiled copy's namespace)
+        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+        a1, a2 = acc1[i], acc2[i]
+        k = 0
+        if certified_free1(s, a1, a2, dt, m):  # noqa: F821
+            s1 = flow1(s, a1, a2, dt, m.R)  # noqa: F821
+        else:
+            s1, impacts, rests, elapsed = advance_m(s, a1, a2, dt, m, 0)  # noqa: F821
+            k = len(impacts)
+            for j in range(min(k, cap)):
+                times[i, j] = impacts[j][0]
+                ends[i, j] = impacts[j][1]
+                post = impacts[j][2]
+                for r in range(6):
+                    posts[i, j, r] = post[r]
+        counts[i] = k
+        for r in range(6):
+            out[r, i] = s1[r]
+        _angle_trig(s1, trig, i)
+
+
+def _flow_batch(S, acc1, acc2, dt, R, out, trig):
+    for i in prange(S.shape[1]):  # noqa: F821
+        s1 = flow1((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), acc1[i], acc2[i], dt, R)  # noqa: F821
+        for r in range(6):
+            out[r, i] = s1[r]
+        _angle_trig(s1, trig, i)
 
 
 class CompiledBatch:

@@ -48,20 +48,17 @@ _J1_REVERSED = tuple(_J1_COEFFS[::-1])
 # cos z and sin z / z by their Taylor series through z^10 and z^10: truncation below 3e-19 for
 # |z| <= SMALL_ANGLE, where the Horner sums are as accurate as libm (about 1 ulp)
 SMALL_ANGLE = 0.15
-_COS_REVERSED = tuple((-1) ** j / math.factorial(2 * j) for j in range(5, -1, -1))
-_SINC_REVERSED = tuple((-1) ** j / math.factorial(2 * j + 1) for j in range(5, -1, -1))
+_C0, _C1, _C2, _C3, _C4, _C5 = ((-1) ** j / math.factorial(2 * j) for j in range(6))
+_S0, _S1, _S2, _S3, _S4, _S5 = ((-1) ** j / math.factorial(2 * j + 1) for j in range(6))
 
 
 def cis_small(z, xp=ARRAY):
     """(cos z, sin z) for |z| <= SMALL_ANGLE by polynomials: a handful of multiply-adds where
-    libm's sin and cos cost tens of nanoseconds (the quadrature's inner loop, flow.py)."""
+    libm's sin and cos cost tens of nanoseconds (the quadrature's inner loop, flow.py). Horner's
+    scheme written out: a loop would cost Python more than the arithmetic."""
     z2 = z * z
-    c = 0.0
-    for coef in _COS_REVERSED:
-        c = c * z2 + coef
-    sn = 0.0
-    for coef in _SINC_REVERSED:
-        sn = sn * z2 + coef
+    c = ((((_C5 * z2 + _C4) * z2 + _C3) * z2 + _C2) * z2 + _C1) * z2 + _C0
+    sn = ((((_S5 * z2 + _S4) * z2 + _S3) * z2 + _S2) * z2 + _S1) * z2 + _S0
     return c, z * sn
 
 
