@@ -7,5 +7,6 @@ def test_throughput_quick(tmp_path):
     report = throughput.main(["--quick", "--out", str(out)])
     text = out.read_text()
     assert text == report
-    for needle in ("Pendulum-v1", "CartPole-v1", "PennyImpacts-Stadium-v0", "SyncVectorEnv", "| 256 |", "command:", "date:"):
+    for needle in ("Pendulum-v1", "CartPole-v1", "PennyImpacts-Stadium-v0", "SyncVectorEnv", "| 256 |", "command:", "date:",
+                   "best of 1 run", "## Targets", "5 M target", "30x target", "half of Pendulum-v1"):
         assert needle in text

@@ -13,7 +13,11 @@ Measured in one run on this machine:
   env of PennyVectorEnv (tracemalloc, construction + reset + steps). Each native run is a few
   hundred steps from reset, so episodes run through their autoresets.
 
-``--quick`` (used by the tests) runs few steps, N up to 256 and two presets.
+Every rate is the best of ``--repeats`` runs (default 3), the convention of Python's timeit: on a
+shared machine the fastest run is the one least slowed down by other load. Every env, Penny or
+Gymnasium, is measured the same way.
+
+``--quick`` (used by the tests) runs few steps, N up to 256, two presets and one repeat.
 """
 from __future__ import annotations
 
@@ -38,8 +42,13 @@ WALLED = "PennyImpacts-Stadium-v0"
 VECTOR_PRESETS = ("PennyReach-Ellipse-v0", "PennyImpacts-Stadium-v0", "PennyReach-Plane-v0", "PennyDrive-Circle-v0")
 
 
-def single_step_us(env_id: str, steps: int, seed: int = 0) -> tuple[float, float]:
-    """(us per step through gymnasium.make, impacts per step)."""
+def single_step_us(env_id: str, steps: int, seed: int = 0, repeats: int = 1) -> tuple[float, float]:
+    """(us per step through gymnasium.make, impacts per step): the best of ``repeats`` runs."""
+    runs = [_single_run(env_id, steps, seed) for _ in range(repeats)]
+    return min(r[0] for r in runs), runs[0][1]
+
+
+def _single_run(env_id: str, steps: int, seed: int) -> tuple[float, float]:
     env = gym.make(env_id)
     env.reset(seed=seed)
     env.action_space.seed(seed)
@@ -60,8 +69,13 @@ def single_step_us(env_id: str, steps: int, seed: int = 0) -> tuple[float, float
     return dt / steps * 1e6, impacts / steps
 
 
-def vector_rate(make, n: int, steps: int, seed: int = 0) -> float:
-    """env-steps per second of a vector env (random actions drawn beforehand)."""
+def vector_rate(make, n: int, steps: int, seed: int = 0, repeats: int = 1) -> float:
+    """env-steps per second of a vector env (random actions drawn beforehand): the best of
+    ``repeats`` runs, each from a new env and reset."""
+    return max(_vector_run(make, n, steps, seed) for _ in range(repeats))
+
+
+def _vector_run(make, n: int, steps: int, seed: int) -> float:
     venv = make(n)
     venv.reset(seed=seed)
     venv.action_space.seed(seed)
@@ -108,10 +122,15 @@ def main(argv: list[str] | None = None) -> str:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="few steps, N <= 256 (for tests)")
     ap.add_argument("--out", default=None, help="write a Markdown report here")
+    ap.add_argument("--repeats", type=int, default=None, help="runs per measurement, the best is reported "
+                                                               "(default 3, --quick 1)")
     ap.add_argument("--readme", default=None, help="also replace the block between <!-- throughput:start --> and "
                                                     "<!-- throughput:end --> in this file (README.md) with the tables")
     args = ap.parse_args(argv)
     quick = args.quick
+    repeats = args.repeats if args.repeats is not None else (1 if quick else 3)
+    if repeats < 1:
+        ap.error(f"--repeats must be >= 1, got {repeats}")
     single_steps = 1000 if quick else 20_000
     lines = ["# Throughput of penny_env", "",
              f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
@@ -119,14 +138,15 @@ def main(argv: list[str] | None = None) -> str:
              f"numba {_numba_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
              f"- command: `python -m penny_env.analysis.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
+             f"- every rate: the best of {repeats} run(s), for every env alike",
              "", "## Single environment (gymnasium.make, random actions, resets included)", "",
              "| env | us/step | steps/s | vs Pendulum-v1 (time ratio) | impacts/step |", "| --- | ---: | ---: | ---: | ---: |"]
-    pend, _ = single_step_us("Pendulum-v1", single_steps)
-    cart, _ = single_step_us("CartPole-v1", single_steps)
+    pend, _ = single_step_us("Pendulum-v1", single_steps, repeats=repeats)
+    cart, _ = single_step_us("CartPole-v1", single_steps, repeats=repeats)
     ids = [WALLED, "PennyReach-Plane-v0"] if quick else env_ids()
     rows = [("Pendulum-v1", pend, 0.0), ("CartPole-v1", cart, 0.0)]
     for env_id in ids:
-        us, imp = single_step_us(env_id, single_steps)
+        us, imp = single_step_us(env_id, single_steps, repeats=repeats)
         rows.append((env_id, us, imp))
     for name, us, imp in rows:
         lines.append(f"| {name} | {us:.1f} | {1e6 / us:,.0f} | {us / pend:.2f} | {imp:.3f} |")
@@ -138,20 +158,26 @@ def main(argv: list[str] | None = None) -> str:
               f"PennyVectorEnv's default backend here: **{backend}**.", "",
               "| env | N | PennyVectorEnv | numpy backend | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
               "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    big = []  # (env, N, native rate, sync rate) at the largest N
     for env_id in presets:
         for n in sizes:
             steps = _steps_for(n, quick)
-            native = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k), n, steps)
+            native = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k), n, steps, repeats=repeats)
             numpy_rate = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, backend="numpy"), n,
-                                     max(3, steps // 4) if n >= 256 else steps)
+                                     max(3, steps // 4) if n >= 256 else steps, repeats=repeats)
             sync_steps = max(3, min(steps, (2_000 if quick else 40_000) // n))
-            sync = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, vectorization_mode="sync"), n, sync_steps)
-            cp = vector_rate(lambda k: gym.make_vec("CartPole-v1", num_envs=k, vectorization_mode="vector_entry_point"), n, steps)
+            sync = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, vectorization_mode="sync"), n, sync_steps,
+                               repeats=repeats)
+            cp = vector_rate(lambda k: gym.make_vec("CartPole-v1", num_envs=k, vectorization_mode="vector_entry_point"),
+                             n, steps, repeats=repeats)
             mem = peak_memory_per_env(env_id, n)
+            if n == max(sizes):
+                big.append((env_id, n, native, sync))
             lines.append(f"| {env_id} | {n} | {native:,.0f} | {numpy_rate:,.0f} | {sync:,.0f} | {native / sync:.1f} | {cp:,.0f} "
                          f"| {mem / 1024:.1f} KiB |")
             print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  numpy {numpy_rate:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
                   f"  CartPole {cp:12,.0f}/s  mem/env {mem / 1024:.1f} KiB", flush=True)
+    lines += ["", "## Targets (issue 4), from the numbers above", ""] + _targets(rows, pend, big)
     report = "\n".join(lines) + "\n"
     if args.readme:
         update_readme(args.readme, lines)
@@ -160,6 +186,23 @@ def main(argv: list[str] | None = None) -> str:
         with open(args.out, "w") as f:
             f.write(report)
     return report
+
+
+def _targets(single_rows, pend_us: float, big) -> list[str]:
+    """Met / not met, for each target, from the measured numbers."""
+    walled = [(name, us) for name, us, imp in single_rows if name.startswith("Penny") and imp > 0]
+    best = min(walled, key=lambda r: r[1]) if walled else None
+    out = []
+    if best is not None:
+        ok = best[1] <= 2.0 * pend_us
+        out.append(f"- single env at least half of Pendulum-v1's steps/s on a walled preset with impacts: "
+                   f"{'met' if ok else 'NOT met'} ({best[0]}: {best[1] / pend_us:.2f}x Pendulum-v1's step time)")
+    for env_id, n, native, sync in big:
+        rate_ok = native >= 5e6
+        ratio_ok = native >= 30.0 * sync
+        out.append(f"- {env_id}, N = {n}: {native / 1e6:.2f} M env-steps/s, 5 M target {'met' if rate_ok else 'NOT met'}; "
+                   f"{native / sync:.0f}x SyncVectorEnv, 30x target {'met' if ratio_ok else 'NOT met'}")
+    return out
 
 
 def update_readme(path: str, lines: list[str]) -> None:
