@@ -266,16 +266,7 @@ class PennyVectorEnv(VectorEnv):
         else:
             obs = c.observe(self._S, self._target, self._count, self._trig)
             if done.any():
-                idx = np.flatnonzero(done)
-                final_obs = np.empty(n, dtype=object)
-                final_info = np.empty(n, dtype=object)
-                for i in idx:  # only the envs whose episode ended (SB3-style final observations)
-                    final_obs[i] = obs[i].copy()
-                    final_info[i] = {"is_success": bool(terminated[i])}
-                info["final_obs"], info["_final_obs"] = final_obs, done.copy()
-                info["final_info"], info["_final_info"] = final_info, done.copy()
-                self._episodes[done] += np.uint64(1)
-                self._reset_envs(done)
+                self._end_episodes_same_step(info, obs, done, terminated)
                 obs = c.observe(self._S, self._target, self._count, self._trig)
         return obs, reward.astype(np.float64), terminated, truncated, info
 
@@ -305,18 +296,25 @@ class PennyVectorEnv(VectorEnv):
         info = self._info(counts, times, ends, ke)
         if done.any():
             info["is_success"], info["_is_success"] = terminated.copy(), done.copy()
-            rows = np.flatnonzero(done)
-            final_obs = np.empty(n, dtype=object)
-            final_info = np.empty(n, dtype=object)
-            for i in rows:  # only the envs whose episode ended (SB3-style final observations)
-                final_obs[i] = obs[i].copy()
-                final_info[i] = {"is_success": bool(terminated[i])}
-            info["final_obs"], info["_final_obs"] = final_obs, done.copy()
-            info["final_info"], info["_final_info"] = final_info, done.copy()
-            self._episodes[done] += np.uint64(1)
-            self._reset_envs(done)
+            rows = self._end_episodes_same_step(info, obs, done, terminated)
             self._compiled.observe_rows(rows, self._S, self._trig, self._target, self._count, obs)
         return obs, reward, terminated, truncated, info
+
+    def _end_episodes_same_step(self, info, obs, done, terminated):
+        """SAME_STEP autoreset: the last obs and info of the envs whose episode ended go to
+        info["final_obs"] / info["final_info"], then those envs reset; returns their indices."""
+        n = self.num_envs
+        rows = np.flatnonzero(done)
+        final_obs = np.empty(n, dtype=object)
+        final_info = np.empty(n, dtype=object)
+        for i in rows:  # only the envs whose episode ended (SB3-style final observations)
+            final_obs[i] = obs[i].copy()
+            final_info[i] = {"is_success": bool(terminated[i])}
+        info["final_obs"], info["_final_obs"] = final_obs, done.copy()
+        info["final_info"], info["_final_info"] = final_info, done.copy()
+        self._episodes[done] += np.uint64(1)
+        self._reset_envs(done)
+        return rows
 
     def _extend_trails(self):
         if self._trails is not None:
