@@ -11,7 +11,7 @@ import penny_env as pe
 from penny_env import PennyVectorEnv
 from penny_env.physics import advance, flow
 from penny_env.physics.compiled import IMPACT_CAPACITY, CompiledBatch, available, compiled_functions
-from penny_env.physics.kernels import SMALL_ANGLE, cis_small
+from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis_small
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import SolverSettings
 from penny_env.physics.scalar import advance1, flow1
@@ -75,13 +75,18 @@ def test_compiled_flow_on_the_plane_equals_numpy(seed, steer):
     assert fns["flow1"](tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01) == flow1(tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01)
 
 
-@given(z=st.floats(-SMALL_ANGLE, SMALL_ANGLE))
-def test_small_angle_polynomials_match_libm(z):
-    c, s = cis_small(z, pe.physics.kernels.SCALAR)
+@pytest.mark.parametrize("cis, limit", [(cis_small, SMALL_ANGLE), (cis_medium, MEDIUM_ANGLE)])
+@hsettings(max_examples=300)
+@given(u=st.floats(-1.0, 1.0))
+def test_small_angle_polynomials_match_libm(cis, limit, u):
+    z = u * limit
+    c, s = cis(z, pe.physics.kernels.SCALAR)
     assert abs(c - math.cos(z)) <= 2.3e-16 and abs(s - math.sin(z)) <= 2 * math.ulp(max(abs(z), 1e-300)) + 1e-300
     arr = np.array([z, -z, 0.5 * z])
-    ca, sa = cis_small(arr)
+    ca, sa = cis(arr)
     assert ca[0] == c and sa[0] == s  # numpy and floats: the same operations
+    cc, sc = compiled_functions()[cis.__name__](z)
+    assert cc == c and sc == s  # and compiled
 
 
 def test_backend_choice_and_errors():

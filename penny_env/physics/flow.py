@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import SMALL_ANGLE, angles_at, cis_small, displacement_closed, end_point, sinc_kernels  # noqa: F401
+from .kernels import (MEDIUM_ANGLE, SMALL_ANGLE, angles_at, cis_medium, cis_small, displacement_closed,  # noqa: F401
+                      end_point, sinc_kernels)
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
@@ -34,17 +35,24 @@ MAX_PHASE_PER_PANEL = 3.0
 # tests/reference/quadrature_rules.py with mpmath; tests/test_flow.py checks each limit against
 # mpmath through flow()). Control periods of RL scenes sweep about 0.1 rad: 6 or 7 nodes.
 RULE_SIZES = ((0.1, 6), (0.3, 7), (0.8, 8), (1.5, 9), (2.0, 10), (MAX_PHASE_PER_PANEL, 12))
-# Each rule is (limit, centred nodes on [-1/2, 1/2], weights, small): a panel's integrand is
+# Each rule is (limit, centred nodes on [-1/2, 1/2], weights, cis): a panel's integrand is
 # evaluated about its midpoint m, e^{i phi(m + u)} = e^{i phi(m)} e^{i psi(u)} with |psi| <= limit / 2,
-# so one sin/cos pair per panel; "small" rules (limit <= 2 SMALL_ANGLE) take e^{i psi} from
-# kernels.cis_small's polynomials, the others from libm.
-RULES = tuple((limit, tuple((0.5 * x).tolist()), tuple((0.5 * wt).tolist()), limit <= 2.0 * SMALL_ANGLE)
+# so one sin/cos pair per panel; e^{i psi} comes from kernels.cis_small's polynomials (cis = CIS_SMALL,
+# limit <= 2 SMALL_ANGLE), from cis_medium's (CIS_MEDIUM, limit <= 2 MEDIUM_ANGLE) or from libm (CIS_LIBM).
+CIS_LIBM, CIS_SMALL, CIS_MEDIUM = 0, 1, 2
+
+
+def _cis_kind(limit):
+    return CIS_SMALL if limit <= 2.0 * SMALL_ANGLE else (CIS_MEDIUM if limit <= 2.0 * MEDIUM_ANGLE else CIS_LIBM)
+
+
+RULES = tuple((limit, tuple((0.5 * x).tolist()), tuple((0.5 * wt).tolist()), _cis_kind(limit))
               for limit, (x, wt) in ((limit, np.polynomial.legendre.leggauss(n)) for limit, n in RULE_SIZES))
 # The same rules as equal-length tuples (zero-padded) with their node counts: the form the scalar
 # loop (scalar.displacement1) indexes, in plain Python and compiled alike.
 RULE_LIMITS = tuple(r[0] for r in RULES)
 RULE_COUNTS = tuple(len(r[1]) for r in RULES)
-RULE_SMALL = tuple(r[3] for r in RULES)
+RULE_CIS = tuple(r[3] for r in RULES)
 _PAD = max(RULE_COUNTS)
 RULE_NODES = tuple(r[1] + (0.0,) * (_PAD - len(r[1])) for r in RULES)
 RULE_WEIGHTS = tuple(r[2] + (0.0,) * (_PAD - len(r[2])) for r in RULES)
@@ -70,7 +78,7 @@ def displacement_quadrature(W, w, ph, acc1, acc2, t, R):
     per_panel = phase_sweep(w, acc1, t) / k
     dx, dy = np.zeros(n), np.zeros(n)
     rule = np.searchsorted(np.array(RULE_LIMITS[:-1]), per_panel, side="left")
-    for r, (_, nodes, weights, small) in enumerate(RULES):
+    for r, (_, nodes, weights, cis) in enumerate(RULES):
         sel = np.flatnonzero(rule == r)
         if sel.size == 0:
             continue
@@ -86,7 +94,8 @@ def displacement_quadrature(W, w, ph, acc1, acc2, t, R):
         u = np.array(nodes)[None, :] * width[:, None]  # (panels, nodes)
         psi = u * (wm + 0.5 * a1[:, None] * u)
         amp = (Wm + a2[:, None] * u) * np.array(weights)[None, :]
-        cs, sn = cis_small(psi) if small else (np.cos(psi), np.sin(psi))
+        cs, sn = (cis_small(psi) if cis == CIS_SMALL else cis_medium(psi) if cis == CIS_MEDIUM
+                  else (np.cos(psi), np.sin(psi)))
         # cumsum adds the nodes strictly in sequence (np.sum would add them pairwise)
         px = np.cumsum(amp * cs, axis=1)[:, -1]
         py = np.cumsum(amp * sn, axis=1)[:, -1]

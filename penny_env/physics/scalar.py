@@ -16,8 +16,9 @@ import weakref
 from functools import lru_cache
 from typing import NamedTuple
 
-from .flow import MAX_PHASE_PER_PANEL, RULE_COUNTS, RULE_LIMITS, RULE_NODES, RULE_SMALL, RULE_WEIGHTS, phase_sweep
-from .kernels import (SCALAR, acceleration_bound, angles_at, cis_small, curvature_bounds, curvature_step, displacement_closed,
+from .flow import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_COUNTS, RULE_LIMITS, RULE_NODES,
+                   RULE_WEIGHTS, phase_sweep)
+from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step, displacement_closed,
                       end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
                       time_resolution)
 
@@ -158,7 +159,7 @@ def displacement1(W, w, ph, acc1, acc2, t, R):
     rule = 0
     while rule < len(RULE_LIMITS) - 1 and per_panel > RULE_LIMITS[rule]:
         rule += 1
-    nodes, weights, small = RULE_NODES[rule], RULE_WEIGHTS[rule], RULE_SMALL[rule]
+    nodes, weights, cis = RULE_NODES[rule], RULE_WEIGHTS[rule], RULE_CIS[rule]
     width = t / k
     dx = dy = 0.0
     for p in range(k):
@@ -171,8 +172,10 @@ def displacement1(W, w, ph, acc1, acc2, t, R):
             u = nodes[j] * width
             psi = u * (wm + 0.5 * acc1 * u)
             amp = (Wm + acc2 * u) * weights[j]
-            if small:
+            if cis == CIS_SMALL:
                 cs, sn = cis_small(psi, SCALAR)
+            elif cis == CIS_MEDIUM:
+                cs, sn = cis_medium(psi, SCALAR)
             else:
                 cs, sn = math.cos(psi), math.sin(psi)
             px += amp * cs
