@@ -8,7 +8,7 @@ from gymnasium.vector import AutoresetMode
 from hypothesis import given, settings as hsettings, strategies as st
 
 import penny_env as pe
-from penny_env import PennyVectorEnv
+from penny_env import PennyEnv, PennyVectorEnv
 from penny_env.physics import advance, flow
 from penny_env.physics.compiled import IMPACT_CAPACITY, CompiledBatch, available, compiled_functions
 from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis_small
@@ -158,3 +158,28 @@ def test_auto_falls_back_to_numpy_without_numba(monkeypatch):
     assert PennyVectorEnv(2, backend="auto")._core.backend == "numpy"
     with pytest.raises(ValueError, match="numba"):
         PennyVectorEnv(2, backend="numba")
+
+
+@pytest.mark.parametrize("kw", [dict(scene="stadium", task="impacts"), dict(scene="circle", task="park", law="plastic"),
+                                dict(scene="ellipse", task="reach", law=0.5, actuation="steer"),
+                                dict(scene="plane", task="reach"),
+                                dict(scene="ellipse", task="impacts", table={"kind": "ellipse", "a": 0.03, "b": 0.011},
+                                     control_dt=0.5, init={"theta_dot": [20.0, 40.0], "spawn_fraction": 0.05})])
+def test_single_env_backends_agree(kw):
+    # the single env's compiled physics (backend "numba") and its plain-Python loop ("numpy"): bitwise
+    envs = [PennyEnv(backend=b, max_episode_steps=60, **kw) for b in ("numba", "numpy")]
+    assert [e._core.fast.compiled for e in envs] == [True, False]
+    obs = [e.reset(seed=11)[0] for e in envs]
+    assert np.array_equal(obs[0], obs[1])
+    acts = np.random.default_rng(4).uniform(-1.2, 1.2, (150,) + envs[0].action_space.shape).astype(np.float32)
+    impacts = 0
+    for t, a in enumerate(acts):
+        out = [e.step(a) for e in envs]
+        assert np.array_equal(out[0][0], out[1][0]) and out[0][1:4] == out[1][1:4], t
+        assert out[0][4] == out[1][4], t  # info: impact times and ends, energy, time, distance
+        assert np.array_equal(envs[0].state, envs[1].state)
+        impacts += out[0][4]["impacts"]
+        if out[0][2] or out[0][3]:
+            for e in envs:
+                e.reset()
+    assert impacts > 0 or kw["task"] != "impacts"

@@ -32,7 +32,8 @@ def test_ids_cover_tasks_scenes_laws_actuations():
 
 
 def test_import_is_light():
-    code = ("import sys, penny_env, gymnasium as gym; gym.make('PennyReach-Ellipse-v0');"
+    # numba is imported only by a compiled backend, which backend="numpy" declines
+    code = ("import sys, penny_env, gymnasium as gym; gym.make('PennyReach-Ellipse-v0', backend='numpy');"
             "print([m for m in ('torch', 'matplotlib', 'pygame', 'scipy', 'stable_baselines3', 'numba') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
@@ -96,19 +97,24 @@ def test_impacts_happen_with_random_actions():
         assert total >= 5, env_id
 
 
-def test_open_plane_never_searches(monkeypatch):
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_open_plane_never_searches(monkeypatch, backend):
     import penny_env.envs.core as core
-    from penny_env.envs import fast_path
+    from penny_env.physics.compiled import available
+    if backend == "numba" and not available():
+        pytest.skip("numba is not installed")
     calls = []
-    monkeypatch.setattr(core, "advance", lambda *a, **k: calls.append(1))
-    monkeypatch.setattr(fast_path.ScalarPhysics, "certified_free", lambda *a, **k: calls.append(1))
-    monkeypatch.setattr(fast_path, "advance_m", lambda *a, **k: calls.append(1))
-    monkeypatch.setattr(core, "certified_free", lambda *a, **k: calls.append(1))
-    env = gym.make("PennyReach-Plane-v0")
+    record = lambda *a, **k: calls.append(1)  # noqa: E731
+    monkeypatch.setattr(core, "advance", record)
+    monkeypatch.setattr(core, "certified_free", record)
+    env = gym.make("PennyReach-Plane-v0", backend=backend)
+    assert env.unwrapped._core.fast.compiled == (backend == "numba")
+    monkeypatch.setattr(env.unwrapped._core.fast, "_certified_flow1", record)
+    monkeypatch.setattr(env.unwrapped._core.fast, "_advance_m", record)
     env.reset(seed=0)
     for _ in range(50):
         env.step(env.action_space.sample())
-    venv = penny_env.PennyVectorEnv(4, "plane", "reach")
+    venv = penny_env.PennyVectorEnv(4, "plane", "reach", backend="numpy")
     venv.reset(seed=0)
     for _ in range(20):
         venv.step(venv.action_space.sample())

@@ -74,14 +74,14 @@ class Core:
         self.impacts = task.kind == "impacts"
         self.obs_dim = 11 if self.impacts else 10
         self.max_steps = task.max_episode_steps
-        self.fast = ScalarPhysics(p, self.table, self.law, self.settings)
+        self.backend = self._backend(backend)  # "numba": compiled physics (single env) and step (vector env)
+        self.fast = ScalarPhysics(p, self.table, self.law, self.settings, compiled=self.backend == "numba")
         ax, ay = scene.spawn_axes()
         self.ax, self.ay = ax, ay
         fmax = 1.0 if self.plane else 1.0 - p.R / self.table.inradius
         self.f_spawn = scene.init["spawn_fraction"]
         self.f_target = task.target_fraction * fmax
         self.delta = 0.0 if self.plane else self.settings.contact_tol * self.table.size
-        self.backend = self._backend(backend)  # the vector env's: "numba" steps with envs/compiled_step.py
 
     def _backend(self, backend):
         """'numba' or 'numpy' for the batched step; 'auto' takes numba where it is installed and the

@@ -12,7 +12,8 @@ refinements only take steps at least as long as search_step with this bound.
 * :class:`ScalarPhysics`: one penny in Python floats. A certified period is one
   physics.scalar.flow1 (bitwise equal to flow.flow); any other period goes to the physics' scalar
   event loop physics.scalar.advance_m (bitwise equal to the batched advance(),
-  tests/test_scalar_batch.py).
+  tests/test_scalar_batch.py). With ``compiled=True`` the same functions run compiled
+  (physics/compiled.py; bitwise the same results, several times faster).
 
 tests/test_fast_path.py checks all of this bitwise on random states.
 """
@@ -21,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.kernels import acceleration_bound, search_step
-from ..physics.scalar import advance_m, certified_free1, flow1, scalar_model
+from ..physics import scalar
+from ..physics.scalar import certified_free1, scalar_model
 
 
 class ScalarPhysics:
@@ -29,12 +31,25 @@ class ScalarPhysics:
 
     A period that the certificate (physics.scalar.certified_free1) shows to be free of impacts is
     one :func:`flow1` (what advance() returns then); any other period goes through the physics' own
-    scalar event loop, physics.scalar.advance_m (bitwise equal to the batched advance())."""
+    scalar event loop, physics.scalar.advance_m (bitwise equal to the batched advance()).
+    compiled: run numba's compiled copies of these functions (needs numba and a built-in table)."""
 
-    def __init__(self, params, table, law, settings):
+    def __init__(self, params, table, law, settings, compiled=False):
         self.params, self.table, self.law, self.settings = params, table, law, settings
         self.R = params.R
         self.model = scalar_model(params, table, law, settings)
+        fns = vars(scalar)
+        if compiled:
+            from ..physics.compiled import compiled_functions
+            fns = compiled_functions()
+        self._flow1, self._certified_flow1, self._advance_m = fns["flow1"], fns["certified_flow1"], fns["advance_m"]
+        self.compiled = compiled
+        if compiled:  # load the machine code now (numba compiles or reads its cache at the first call)
+            rest = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            self._flow1(rest, 0.0, 0.0, 1e-9, self.R)
+            if table is not None:
+                self._certified_flow1(rest, 0.0, 0.0, 1e-9, self.model)
+                self._advance_m(rest, 0.0, 0.0, 1e-9, self.model, 0)
 
     def certified_free(self, s, acc1, acc2, dt):
         """:func:`certified_free` for one penny (the same kernels, for floats)."""
@@ -44,10 +59,13 @@ class ScalarPhysics:
         """(new_state, impacts, rests) over one interval (advance.advance for one penny): impacts a
         list of (time since the interval start, end, post-impact state), rests of (time, pinned)."""
         if self.table is None:
-            return flow1(s, acc1, acc2, dt, self.R), (), ()
-        if self.certified_free(s, acc1, acc2, dt):
-            return flow1(s, acc1, acc2, dt, self.R), (), ()
-        s, impacts, rests, _ = advance_m(s, acc1, acc2, dt, self.model, 0)
+            return self._flow1(s, acc1, acc2, dt, self.R), (), ()
+        free, s1 = self._certified_flow1(s, acc1, acc2, dt, self.model)
+        if free:
+            return s1, (), ()
+        s, impacts, rests, _ = self._advance_m(s, acc1, acc2, dt, self.model, 0)
+        if self.compiled:  # numba's typed lists as Python lists
+            impacts, rests = list(impacts), list(rests)
         return s, impacts, rests
 
 
