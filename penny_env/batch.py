@@ -150,15 +150,32 @@ class BatchResult:
         return self.impact_times[self.impact_env == i]
 
 
+def _stepper(params, table, law, settings, backend):
+    """advance() over one interval for (6, N) states: (new S, None or (env, time, end, post))."""
+    from .physics.compiled import CompiledBatch, choose_backend
+
+    if choose_backend(backend, params, table, law, settings) == "numba":
+        return CompiledBatch(params, table, law, settings).advance
+
+    def step(S, acc1, acc2, dt):
+        S, log, _ = advance(S, acc1, acc2, dt, params, table, law, settings)
+        return S, (None if log.env.size == 0 else (log.env, log.time, log.end, log.state))
+    return step
+
+
 def simulate(states, *, params=None, table, law="elastic", t_final, controls=None, control_dt=None,
-             settings=None) -> BatchResult:
+             settings=None, backend="auto") -> BatchResult:
     """Simulate N pennies to t_final with every impact, batched (a loop over control intervals,
     never over pennies). controls: None (free motion), (K, 2) torques shared by all pennies or
-    (K, N, 2) per penny, row k held on [k, k+1) control_dt; K control_dt must cover t_final."""
+    (K, N, 2) per penny, row k held on [k, k+1) control_dt; K control_dt must cover t_final.
+    backend: "numba" runs the physics' scalar loop compiled and in parallel over the pennies
+    (physics/compiled.py), "numpy" the array event loop; "auto" (default) takes numba where it is
+    installed and the table compiles. Both give bitwise the same results (tests/test_compiled.py)."""
     params = check_params(params)
     tab = _table(table, params)
     law = make_law(law)
     settings = settings or SolverSettings()
+    step = _stepper(params, tab, law, settings, backend)
     S = as_states(states)
     n = S.shape[1]
     if tab is not None:
@@ -194,12 +211,12 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     envs, times, ends, posts = [], [], [], []
     t0 = 0.0
     for (acc1, acc2), dt in zip(acc, dts):
-        S, log, _ = advance(S, acc1, acc2, dt, params, tab, law, settings)
-        if log.env.size:
-            envs.append(log.env)
-            times.append(t0 + log.time)
-            ends.append(log.end)
-            posts.append(log.state)
+        S, log = step(S, acc1, acc2, dt)
+        if log is not None:
+            envs.append(log[0])
+            times.append(t0 + log[1])
+            ends.append(log[2])
+            posts.append(log[3])
         t0 += dt
     if envs:
         env = np.concatenate(envs)

@@ -183,3 +183,22 @@ def test_single_env_backends_agree(kw):
             for e in envs:
                 e.reset()
     assert impacts > 0 or kw["task"] != "impacts"
+
+
+@pytest.mark.parametrize("table, law", [({"kind": "stadium", "radius": 0.1, "length": 0.1}, "elastic"),
+                                        ({"kind": "ellipse", "a": 0.15, "b": 0.2}, "plastic"), (None, "elastic")])
+def test_batch_simulate_backends_agree(table, law):
+    import penny_env.batch as pb
+    rng = np.random.default_rng(5)
+    S = np.zeros((40, 6))
+    S[:, 2:4] = rng.uniform(-3, 3, (40, 2))
+    S[:, 4] = rng.uniform(-15, 15, 40)
+    S[:, 5] = rng.uniform(-2, 2, 40)
+    u = rng.choice((-1.0, 1.0), (30, 40, 2)) * np.array([6.25e-7, 1.5e-5])
+    out = [pb.simulate(S, table=table, law=law, t_final=1.5, controls=u, control_dt=0.05, backend=b)
+           for b in ("numba", "numpy")]
+    for field in ("final_states", "impact_counts", "impact_env", "impact_times", "impact_ends", "impact_states"):
+        assert np.array_equal(getattr(out[0], field), getattr(out[1], field)), field
+    assert table is None or out[0].impact_counts.sum() > 0
+    with pytest.raises(ValueError, match="backend"):
+        pb.simulate(S, table=table, t_final=1.0, backend="gpu")

@@ -84,23 +84,9 @@ class Core:
         self.delta = 0.0 if self.plane else self.settings.contact_tol * self.table.size
 
     def _backend(self, backend):
-        """'numba' or 'numpy' for the batched step; 'auto' takes numba where it is installed and the
-        table compiles (the built-in tables and the open plane)."""
-        from ..physics import compiled
-        from ..physics.scalar import OTHER, scalar_model
-
-        if backend not in ("auto", "numpy", "numba"):
-            raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
-        compiles = self.plane or scalar_model(self.params, self.table, self.law, self.settings).kind != OTHER
-        if backend == "numba":
-            if not compiled.available():
-                raise ValueError("backend='numba' needs numba: pip install \"penny_env[fast]\"")
-            if not compiles:
-                raise ValueError(f"backend='numba': scene.table {type(self.table).__name__} does not compile "
-                                 "(only ellipse, circle, stadium and the open plane do); use backend='numpy'")
-        if backend == "auto":
-            return "numba" if compiled.available() and compiles else "numpy"
-        return backend
+        """'numba' or 'numpy' (see physics.compiled.choose_backend)."""
+        from ..physics.compiled import choose_backend
+        return choose_backend(backend, self.params, self.table, self.law, self.settings, "scene.table")
 
     def __getstate__(self):
         return {"scene": self.scene, "task": self.task, "settings": self.settings, "backend": self.backend}

@@ -37,8 +37,9 @@ class PennyVectorEnv(VectorEnv):
     and in parallel over the envs (envs/compiled_step.py; needs the optional numba,
     ``pip install "penny_env[fast]"``), "numpy" the array event loop (physics.advance) and array
     code; "auto" (default) takes numba where it is installed and the table compiles (ellipse,
-    circle, stadium, open plane). Both give the single env's trajectories (tested). The first numba step of a fresh install compiles for a few seconds;
-    later processes load the machine code from numba's cache.
+    circle, stadium, open plane). Both give the single env's trajectories (tested). The first
+    numba step of a fresh install compiles for a few seconds; later processes load the machine
+    code from numba's cache.
 
     Autoreset: NEXT_STEP (default) - the step after an env's episode ended resets it (its
     obs is the reset obs, reward 0, terminated = truncated = False); SAME_STEP - the ending step

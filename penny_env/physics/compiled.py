@@ -37,6 +37,26 @@ def available() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
+def choose_backend(backend, params, table, law, settings, table_field="table") -> str:
+    """'numba' or 'numpy' for ``backend`` in 'auto', 'numba', 'numpy': 'auto' takes numba where it is
+    installed and the table compiles (the built-in tables and the open plane, table None); an
+    explicit 'numba' that cannot run raises ValueError naming the cause."""
+    from .scalar import OTHER, scalar_model
+
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
+    compiles = table is None or scalar_model(params, table, law, settings).kind != OTHER
+    if backend == "numba":
+        if not available():
+            raise ValueError("backend='numba' needs numba: pip install \"penny_env[fast]\"")
+        if not compiles:
+            raise ValueError(f"backend='numba': {table_field} {type(table).__name__} does not compile "
+                             "(only ellipse, circle, stadium and the open plane do); use backend='numpy'")
+    if backend == "auto":
+        return "numba" if available() and compiles else "numpy"
+    return backend
+
+
 def _other_table(m, x, y):
     """Stands in for scalar.other_terms / other_hess, which call Python objects: compiled models
     only ever have the built-in kinds (CompiledBatch refuses other tables)."""
