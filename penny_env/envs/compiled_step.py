@@ -19,7 +19,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .tasks import TaskConstants  # noqa: F401  (documents what ``k`` is)
 
 _COMPILED = None
 
@@ -208,7 +207,7 @@ class CompiledStep:
         self.fns = compiled_env_functions()
         self.p = env_constants(core)
         self.m = scalar_model(core.params, core.table, core.law, core.settings)
-        self.k = core.k
+        self.k = core.k  # tasks.TaskConstants
         self.obs_dim = core.obs_dim
         self._warm_up()
 
