@@ -7,5 +7,5 @@ __version__ = "0.1.0"
 __all__ = ["PennyParams", "SolverSettings", "Table", "Ellipse", "Circle", "Stadium", "ConvexTable",
            "simulate", "impact_map", "Trajectory", "PennyEnv", "PennyVectorEnv", "register_envs"]
 
-# the Gymnasium ids (configs/envs.yaml): gymnasium.make("penny_env:PennyReach-Ellipse-v0") works
+# the Gymnasium ids (penny_env/presets/envs.yaml): gymnasium.make("penny_env:PennyReach-Ellipse-v0") works
 register_envs()

@@ -29,8 +29,8 @@ class PennyEnv(gym.Env):
     found and processed). The open plane (table kind "none") is the non-hybrid penny.
 
     **Configuration.** ``PennyEnv(scene="ellipse", task="reach", render_mode=None, backend="auto",
-    **overrides)``: scene and task are preset names (``configs/scenes/*.yaml``,
-    ``configs/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` / ``Task``
+    **overrides)``: scene and task are preset names (``penny_env/presets/scenes/*.yaml``,
+    ``penny_env/presets/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` / ``Task``
     objects; keyword overrides set any field of either (see their docstrings); an unknown or
     invalid field raises a ``ConfigError`` (a ``ValueError``) naming it. backend: "numba" runs the
     physics' scalar event loop compiled (the optional numba, ``pip install "penny_env[fast]"``),

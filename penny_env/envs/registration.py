@@ -1,4 +1,4 @@
-"""Registration of the env ids listed in configs/envs.yaml (done by ``import penny_env``)."""
+"""Registration of the env ids listed in penny_env/presets/envs.yaml (done by ``import penny_env``)."""
 from __future__ import annotations
 
 from .scene import _preset, env_presets
@@ -8,12 +8,12 @@ VECTOR_ENTRY_POINT = "penny_env.envs.vector_env:PennyVectorEnv"
 
 
 def env_ids() -> list[str]:
-    """The registered ids, in configs/envs.yaml order."""
+    """The registered ids, in penny_env/presets/envs.yaml order."""
     return list(env_presets())
 
 
 def register_envs() -> list[str]:
-    """Register every id of configs/envs.yaml with gymnasium (idempotent)."""
+    """Register every id of penny_env/presets/envs.yaml with gymnasium (idempotent)."""
     from gymnasium.envs.registration import register, registry
 
     ids = []

@@ -1,11 +1,11 @@
-"""Scenes and tasks: frozen dataclasses, YAML presets under configs/, validation that names fields.
+"""Scenes and tasks: frozen dataclasses, YAML presets under penny_env/presets/, validation that names fields.
 
 A **scene** is the physical setting: the table, the impact law, the actuation, the penny's
 parameters, the control period, the torque limits and the initial-state distribution. A **task**
 is what the agent is asked to do: reward, termination, the episode length.
 
-Presets are YAML files: ``configs/scenes/<name>.yaml``, ``configs/tasks/<name>.yaml`` and
-``configs/envs.yaml`` (one entry per registered env id: a scene, a task and overrides).
+Presets are YAML files: ``penny_env/presets/scenes/<name>.yaml``, ``penny_env/presets/tasks/<name>.yaml`` and
+``penny_env/presets/envs.yaml`` (one entry per registered env id: a scene, a task and overrides).
 :func:`resolve` turns (scene, task, overrides) into validated :class:`Scene` and :class:`Task`;
 every override key must be a field of one of them (nested dict fields such as ``init`` or
 ``torque_limits`` are merged key by key; ``table`` is replaced when it names a ``kind``).
@@ -21,7 +21,7 @@ from typing import Any
 from ..physics import PennyParams, make_law, make_table
 from ..physics.tables import Table
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 
 ACTUATIONS = {"both": (0, 1), "steer": (0,), "drive": (1,)}
 TASK_KINDS = ("reach", "park", "impacts")
@@ -87,7 +87,7 @@ PARAM_DEFAULTS = {"R": 0.01, "m": 0.0025, "I": 1.25e-7, "J": 6.25e-8}
 
 @dataclass(frozen=True)
 class Scene:
-    """The physical setting of an environment (see configs/scenes/*.yaml).
+    """The physical setting of an environment (see penny_env/presets/scenes/*.yaml).
 
     table:        {"kind": "ellipse", "a", "b"} | {"kind": "circle", "r"} |
                   {"kind": "stadium", "radius", "length"} | {"kind": "none"} (the open plane)
@@ -197,7 +197,7 @@ class Scene:
 
 @dataclass(frozen=True)
 class Task:
-    """Reward and termination (see configs/tasks/*.yaml and the PennyEnv docstring).
+    """Reward and termination (see penny_env/presets/tasks/*.yaml and the PennyEnv docstring).
 
     kind:              "reach" | "park" | "impacts"
     max_episode_steps: episode length (truncation)
@@ -320,7 +320,7 @@ def resolve(scene="ellipse", task="reach", **overrides) -> tuple[Scene, Task]:
 
 
 def env_presets() -> dict:
-    """The registered env ids: {id: {"scene": ..., "task": ..., **overrides}} from configs/envs.yaml."""
+    """The registered env ids: {id: {"scene": ..., "task": ..., **overrides}} from penny_env/presets/envs.yaml."""
     data = _yaml_load(CONFIG_DIR / "envs.yaml")
     return data
 
