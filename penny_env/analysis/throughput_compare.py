@@ -1,0 +1,175 @@
+"""Throughput of two source trees of penny_env, side by side in one run (before / after a change).
+
+    python -m penny_env.analysis.throughput_compare --before OLD_TREE --after NEW_TREE [--rounds 3] [--out FILE]
+
+Each tree is measured in its own subprocess (``PYTHONPATH=TREE``, so each imports its own penny_env) and the
+two alternate, round after round, so that both see the same load of a shared machine; every rate is the best
+of the rounds (timeit's convention). Measured for every env id the two trees share: the single env through
+``gymnasium.make`` (us per step, random actions, resets included) and the native vector env
+(``gymnasium.make_vec``, its default backend) at N = 1, 16, 256, 4096 (env-steps per second). The report
+gives after / before speed ratios (above 1: faster) and lists every measurement that lost more than
+``--tolerance`` (default 5%).
+
+``--quick`` (tests): one round, two ids, N <= 16, few steps, and the report goes to a temporary directory
+unless ``--out`` is given.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+
+SIZES = (1, 16, 256, 4096)
+QUICK_IDS = ("PennyImpacts-Stadium-v0", "PennyReach-Plane-v0")
+
+
+def _worker(args) -> dict:
+    """Runs inside a subprocess whose PYTHONPATH is the tree under test: prints the rates as JSON."""
+    import gymnasium as gym
+    import numpy as np
+    import penny_env  # noqa: F401  (registers the ids)
+    from penny_env.envs.registration import env_ids
+
+    ids = [i for i in (args.ids or env_ids())]
+    out = {"penny_env": os.path.dirname(penny_env.__file__), "single": {}, "vector": {}}
+    for env_id in ids:
+        env = gym.make(env_id)
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        acts = [env.action_space.sample() for _ in range(args.single_steps)]
+        for a in acts[:50]:  # warm up (numba's cache, first episode)
+            if any(env.step(a)[2:4]):
+                env.reset()
+        t0 = time.perf_counter()
+        for a in acts:
+            if any(env.step(a)[2:4]):
+                env.reset()
+        out["single"][env_id] = (time.perf_counter() - t0) / len(acts) * 1e6
+        env.close()
+    for env_id in ids:
+        for n in args.sizes:
+            steps = max(3, min(1000, args.vector_budget // n))
+            venv = gym.make_vec(env_id, num_envs=n)
+            venv.reset(seed=0)
+            venv.action_space.seed(0)
+            acts = [venv.action_space.sample() for _ in range(steps)]
+            for a in acts[:3]:
+                venv.step(a)
+            t0 = time.perf_counter()
+            for a in acts:
+                venv.step(a)
+            out["vector"][f"{env_id}|{n}"] = n * steps / (time.perf_counter() - t0)
+            venv.close()
+    np.asarray(0)  # numpy imported for gymnasium's spaces either way
+    return out
+
+
+def _measure(tree: str, args) -> dict:
+    env = dict(os.environ, PYTHONPATH=os.path.abspath(tree), PYTHONDONTWRITEBYTECODE="1")
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--single-steps", str(args.single_steps),
+           "--vector-budget", str(args.vector_budget), "--sizes", *map(str, args.sizes)]
+    if args.ids:
+        cmd += ["--ids", *args.ids]
+    res = subprocess.run(cmd, env=env, cwd=tempfile.gettempdir(), capture_output=True, text=True)
+    if res.returncode != 0:
+        raise RuntimeError(f"measuring {tree} failed:\n{res.stderr[-3000:]}")
+    data = json.loads(res.stdout.strip().splitlines()[-1])
+    if os.path.realpath(data["penny_env"]) != os.path.realpath(os.path.join(tree, "penny_env")):
+        raise RuntimeError(f"{tree}: the subprocess imported penny_env from {data['penny_env']}")
+    return data
+
+
+def _best(runs: list[dict], kind: str, better) -> dict:
+    keys = set(runs[0][kind])
+    for r in runs[1:]:
+        keys &= set(r[kind])
+    return {k: better(r[kind][k] for r in runs) for k in keys}
+
+
+def main(argv: list[str] | None = None) -> str:
+    argv = sys.argv[1:] if argv is None else argv
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--before", help="source tree measured first in each round (the old code)")
+    ap.add_argument("--after", help="source tree measured second in each round (the new code)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--tolerance", type=float, default=0.05, help="a loss beyond this share is listed")
+    ap.add_argument("--out", default=None, help="Markdown report (default: a temporary directory)")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--ids", nargs="*", default=None, help="env ids (default: every id both trees register)")
+    ap.add_argument("--sizes", nargs="*", type=int, default=None)
+    ap.add_argument("--single-steps", type=int, default=None)
+    ap.add_argument("--vector-budget", type=int, default=None, help="env-steps per vector measurement")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.rounds, args.ids = 1, args.ids or list(QUICK_IDS)
+    args.sizes = args.sizes or ([1, 16] if args.quick else list(SIZES))
+    args.single_steps = args.single_steps or (300 if args.quick else 20_000)
+    args.vector_budget = args.vector_budget or (2_000 if args.quick else 1_200_000)
+    if args.worker:
+        print(json.dumps(_worker(args)))
+        return ""
+    if not args.before or not args.after:
+        ap.error("--before and --after are required")
+    for name in ("before", "after"):
+        tree = getattr(args, name)
+        if not os.path.isdir(os.path.join(tree, "penny_env")):
+            ap.error(f"--{name}: {tree!r} holds no penny_env package")
+    if args.rounds < 1:
+        ap.error(f"--rounds must be >= 1, got {args.rounds}")
+    runs = {"before": [], "after": []}
+    for r in range(args.rounds):
+        for name in ("before", "after"):
+            runs[name].append(_measure(getattr(args, name), args))
+            print(f"round {r + 1}/{args.rounds}: {name} measured", flush=True)
+    single = {k: _best(v, "single", min) for k, v in runs.items()}
+    vector = {k: _best(v, "vector", max) for k, v in runs.items()}
+    rows_s = sorted(set(single["before"]) & set(single["after"]))
+    rows_v = sorted(set(vector["before"]) & set(vector["after"]), key=lambda k: (k.split("|")[0], int(k.split("|")[1])))
+    cmd = "python -m penny_env.analysis.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
+    lines = ["# Throughput before and after a change, side by side", "",
+             f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
+             f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
+             f"- command: `{cmd}`",
+             f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), best of each",
+             "", "## Single environment (us per step, gymnasium.make)", "",
+             "| env | before | after | speed after / before |", "| --- | ---: | ---: | ---: |"]
+    losses = []
+    for k in rows_s:
+        b, a = single["before"][k], single["after"][k]
+        lines.append(f"| {k} | {b:.2f} | {a:.2f} | {b / a:.3f} |")
+        if b / a < 1 - args.tolerance:
+            losses.append(f"single {k}: {b / a:.3f}")
+    lines += ["", "## Vector environment (env-steps per second, gymnasium.make_vec)", "",
+              "| env | N | before | after | speed after / before |", "| --- | ---: | ---: | ---: | ---: |"]
+    for k in rows_v:
+        env_id, n = k.split("|")
+        b, a = vector["before"][k], vector["after"][k]
+        lines.append(f"| {env_id} | {n} | {b:,.0f} | {a:,.0f} | {a / b:.3f} |")
+        if a / b < 1 - args.tolerance:
+            losses.append(f"vector {env_id} N={n}: {a / b:.3f}")
+    ratios = [single["before"][k] / single["after"][k] for k in rows_s] + \
+             [vector["after"][k] / vector["before"][k] for k in rows_v]
+    lines += ["", "## Summary", "",
+              f"- {len(ratios)} measurements; speed ratio after / before: min {min(ratios):.3f}, "
+              f"max {max(ratios):.3f}",
+              f"- losses beyond {args.tolerance:.0%}: " + ("none" if not losses else "; ".join(losses))]
+    report = "\n".join(lines) + "\n"
+    out = args.out or os.path.join(tempfile.mkdtemp(prefix="penny_throughput_compare_"), "throughput_compare.md")
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with open(out, "w") as f:
+        f.write(report)
+    print(report)
+    print(f"report written to {out}")
+    return report
+
+
+if __name__ == "__main__":
+    main()
