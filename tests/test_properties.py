@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 import penny_env as pe
-from penny_env.physics.flow import kinetic_energy
+from penny_env.physics.flows import kinetic_energy
 from conftest import random_inside_state
 
 tables_st = st.one_of(

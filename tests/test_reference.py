@@ -138,7 +138,7 @@ MAPS = json.loads((DATA / "impact_map_cases.json").read_text())["cases"]
 
 @pytest.mark.parametrize("case", FLOWS, ids=[c["tag"] for c in FLOWS])
 def test_flow_cases(case):
-    from penny_env.physics.flow import flow
+    from penny_env.physics.flows import flow
 
     p = _params(case["params"])
     s0, ref = _arr(case["state0"]), _arr(case["state_t"])
