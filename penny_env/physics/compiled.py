@@ -31,7 +31,7 @@ import numpy as np
 # interval (accumulations) is rerun alone to collect them all
 IMPACT_CAPACITY = 8
 
-_COMPILED = None
+_COMPILED: dict = {}  # (tables' formulas, laws) registered -> compiled functions
 
 
 def available() -> bool:
@@ -101,8 +101,10 @@ def _dispatch_functions(folder: Path, n_kinds: int, n_laws: int) -> dict:
     (written only when its text changes: numba's cache keys on the file's time stamp); in memory where
     it cannot be written."""
     source = dispatch_source(n_kinds, n_laws)
-    path = folder / f"penny_env_dispatch_{n_kinds}_{n_laws}.py"
+    path = None if folder is None else folder / f"penny_env_dispatch_{n_kinds}_{n_laws}.py"
     try:
+        if path is None:
+            raise OSError("no file: not cached")
         if not path.exists() or path.read_text() != source:
             folder.mkdir(exist_ok=True)
             path.write_text(source)
@@ -143,7 +145,8 @@ def physics_modules() -> tuple:
     from . import flows, kernels, numba_math, scalar
     from .laws import COMPILED_LAWS
     from .tables import COMPILED_FORMULAS
-    tables = tuple(dict.fromkeys(sys.modules[f.__module__] for f in [g for pair in COMPILED_FORMULAS for g in pair] + COMPILED_LAWS))
+    tables = tuple(dict.fromkeys(sys.modules[f.__module__] for f in [g for pair in COMPILED_FORMULAS for g in pair] + COMPILED_LAWS
+                                 if f.__module__.startswith("penny_env.")))  # users' formulas are never cached
     return (kernels, flows, scalar, numba_math, importlib.import_module(__name__)) + tables
 
 
@@ -159,23 +162,28 @@ def jit_copy(f, namespace, jit):
 
 
 def compiled_functions() -> dict:
-    """name -> compiled function, for kernels.py, flow.phase_sweep and scalar.py (compiled once)."""
-    global _COMPILED
-    if _COMPILED is not None:
-        return _COMPILED
+    """name -> compiled function, for kernels.py, flows.phase_sweep and scalar.py, with the dispatch
+    over the registered tables and laws (compiled once per registry state). With only penny_env's
+    own tables and laws the machine code is cached on disk; a user's registered formulas compile in
+    each process (cache=False: they would otherwise evict the built-in cache at every change)."""
     try:
         import numba
     except ImportError:
-        raise ImportError('the compiled backend needs numba: pip install "penny_env[fast]"') from None
+        raise ImportError('the compiled backend needs numba: pip install numba') from None
     from . import flows, kernels, numba_math, scalar
     from .laws import COMPILED_LAWS
     from .tables import COMPILED_FORMULAS
+    key = (tuple(COMPILED_FORMULAS), tuple(COMPILED_LAWS))
+    if key in _COMPILED:
+        return _COMPILED[key]
+    own = all(f.__module__.startswith("penny_env.") for f in [g for pair in COMPILED_FORMULAS for g in pair] + COMPILED_LAWS)
     cache = Path(__file__).with_name("__pycache__")
-    modules = physics_modules()
-    drop_stale_cache(cache, modules)
-    drop_stale_cache(cache / "__pycache__", modules)  # the generated dispatch's machine code
+    if own:
+        modules = physics_modules()
+        drop_stale_cache(cache, modules)
+        drop_stale_cache(cache / "__pycache__", modules)  # the generated dispatch's machine code
 
-    jit = numba.njit(cache=True)
+    jit = numba.njit(cache=own)
     namespace = {"__builtins__": builtins}
     for module in (kernels, flows, scalar):
         namespace.update({k: v for k, v in vars(module).items() if not k.startswith("__")})
@@ -197,17 +205,17 @@ def compiled_functions() -> dict:
         namespace[f"hess_{k}"] = jit_copy(hess, namespace, jit)
     for j, update in enumerate(COMPILED_LAWS):
         namespace[f"law_{j}"] = jit_copy(update, namespace, jit)
-    for name, f in _dispatch_functions(cache, len(COMPILED_FORMULAS), len(COMPILED_LAWS)).items():
+    for name, f in _dispatch_functions(cache if own else None, len(COMPILED_FORMULAS), len(COMPILED_LAWS)).items():
         namespace[name] = jit_copy(f, namespace, jit)
     fns = {f.__name__: namespace[f.__name__] for f in sources}
     # the loops over pennies, compiled as copies too: module-level functions whose callees are
     # globals of the namespace (closures over dispatchers would miss numba's cache every process)
     namespace["prange"] = numba.prange
     namespace["_angle_trig"] = jit_copy(_angle_trig, namespace, jit)
-    parallel = numba.njit(parallel=True, cache=True)
+    parallel = numba.njit(parallel=True, cache=own)
     for f in (_advance_batch, _flow_batch, _first_impact_batch):
         fns[f.__name__] = jit_copy(f, namespace, parallel)
-    _COMPILED = fns
+    _COMPILED[key] = fns
     return fns
 
 

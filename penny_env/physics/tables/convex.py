@@ -44,12 +44,13 @@ def _ray_boundary(h, extent, n: int) -> np.ndarray:
 
 
 def check_on_grid(owner: str, h, grad, grad_bound: float, hessian_bound: float, extent, grid: int = 97,
-                  inradius=None, hessian=None) -> float:
+                  inradius=None, hessian=None, edge_may_touch=False) -> float:
     """Check a table's callables and numbers on a grid x grid sampling of its extent; returns the
     inradius (the given one, checked, or a lower-bound estimate). ValueError names ``owner`` and the
     failed check: not vectorised or not finite, extent not containing the table, gradient not the
     derivative of h (central differences), a bound below what the grid shows, a non-convex region,
-    an inradius no disk of the table reaches."""
+    an inradius no disk of the table reaches. edge_may_touch: the extent may touch the wall (h = 0 on
+    its edge, to round-off) rather than lie strictly outside the table."""
     xmin, xmax, ymin, ymax = extent
     X, Y = np.meshgrid(np.linspace(xmin, xmax, grid), np.linspace(ymin, ymax, grid))
     try:
@@ -66,8 +67,9 @@ def check_on_grid(owner: str, h, grad, grad_bound: float, hessian_bound: float, 
     if not inside.any():
         raise ValueError(f"{owner}.h: no point of the extent is inside the table (h < 0)")
     edge = np.concatenate([H[0], H[-1], H[:, 0], H[:, -1]])
-    if np.any(edge <= 0):
-        raise ValueError(f"{owner}.extent must contain the table: h <= 0 on the extent's edge")
+    floor = -1e-12 * (np.max(np.abs(H)) + 1e-300) if edge_may_touch else 0.0
+    if np.any(edge < floor) or (not edge_may_touch and np.any(edge == 0)):
+        raise ValueError(f"{owner}.extent must contain the table: h {'<' if edge_may_touch else '<='} 0 on the extent's edge")
     # gradient against central differences of h
     step = 1e-6 * max(xmax - xmin, ymax - ymin)
     fdx = (np.asarray(h(X + step, Y)) - np.asarray(h(X - step, Y))) / (2 * step)
@@ -187,7 +189,8 @@ class ProtocolTable(Table):
                                                  getattr(obj, "third_derivative_bound", 0.0), allow_zero=True)
             self.hessian_jump = length(owner, "hessian_jump", getattr(obj, "hessian_jump", 0.0), allow_zero=True)
         self.inradius = check_on_grid(owner, obj.h, obj.grad, self.grad_bound, self.hessian_bound, self.extent,
-                                      inradius=inradius, hessian=hessian if callable(hessian) else None)
+                                      inradius=inradius, hessian=hessian if callable(hessian) else None,
+                                      edge_may_touch=True)
 
     def _fields(self):
         return {"obj": self._obj}
