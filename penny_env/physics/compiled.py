@@ -200,11 +200,13 @@ def compiled_functions() -> dict:
     namespace["other_terms"] = namespace["other_hess"] = jit(_other_table)
     # the tables' formulas and the dispatch over them (replacing scalar.wall_terms / wall_hess,
     # which index a Python list)
+    def formula(f):  # penny_env's run in the physics namespace (numba_math); a user's in its own globals
+        return jit_copy(f, namespace, jit) if f.__module__.startswith("penny_env.") else jit(f)
     for k, (terms, hess) in enumerate(COMPILED_FORMULAS):
-        namespace[f"terms_{k}"] = jit_copy(terms, namespace, jit)
-        namespace[f"hess_{k}"] = jit_copy(hess, namespace, jit)
+        namespace[f"terms_{k}"] = formula(terms)
+        namespace[f"hess_{k}"] = formula(hess)
     for j, update in enumerate(COMPILED_LAWS):
-        namespace[f"law_{j}"] = jit_copy(update, namespace, jit)
+        namespace[f"law_{j}"] = formula(update)
     for name, f in _dispatch_functions(cache if own else None, len(COMPILED_FORMULAS), len(COMPILED_LAWS)).items():
         namespace[name] = jit_copy(f, namespace, jit)
     fns = {f.__name__: namespace[f.__name__] for f in sources}
