@@ -186,7 +186,7 @@ class Core:
 
         The open plane is one closed-form (or quadrature) flow. With walls, the pennies whose first
         certified search step excludes an impact are flowed directly (what advance() would do),
-        the others go through physics.advance()."""
+        the others go through physics.advance_pennies()."""
         if self.plane:
             return flow(S, acc1, acc2, self.dt, self.R), None
         free = certified_free(S, acc1, acc2, self.dt, self.params, self.table, self.settings)

@@ -1,13 +1,34 @@
-"""One penny in plain floats: the event loop of events.py / advance.py, step for step.
+"""The event loop of the penny, once: one penny in plain floats, numba-compatible.
 
-The single environment and simulate() advance one penny at a time, where numpy's per-call
-overhead would dominate. These functions run the same kernels (kernels.py) in the same order
-as the batched code, so a penny gives bitwise the same trajectory here and inside a batch
-(tests/test_scalar_batch.py checks this). States are 6-tuples (x, y, theta, phi, theta_dot, phi_dot).
+States are 6-tuples (x, y, theta, phi, theta_dot, phi_dot). Everything a penny needs travels in a
+:class:`Model` of plain numbers (the table's formula index and constants, the law's index and
+coefficient included), so physics/compiled.py compiles these very functions (and runs them in
+parallel over the pennies of a batch, physics/pennies.py); in plain Python they run as they are,
+the readable reference the tests compare the compiled loop with, bitwise.
 
-The code is also numba-compatible: everything a penny needs travels in a :class:`Model` of plain
-numbers (the table's kind and constants included), so physics/compiled.py compiles these very
-functions for the vector environment. In plain Python they run as they are.
+Impact search (:func:`first_impact_m`). For an end p(t), g(t) = h(p(t)) is the wall function along
+the flow. While the end is on the table, |p'| <= V and |p''| <= A (bounds from the linear-in-time
+angular velocities), so g'' <= M = L V^2 + G A (L, G: the table's Hessian and gradient bounds).
+From a time t the quadratic g(t) + g'(t) tau + M tau^2 / 2 bounds g from above, and it stays
+<= delta up to its positive root tau* (delta = contact_tol * table size, a few ulps of the table).
+Stepping by tau* therefore never passes over an impact deeper than delta, however grazing.
+Shallower "impacts" are below the round-off of the positions themselves. Near a transversal
+crossing the steps are Newton steps from below and converge quadratically; near a tangency they
+shrink geometrically, so the step count stays small and is capped by settings.max_search_steps
+(end 2: resumed by the caller from the certified time). An impact is declared where g >= -delta
+with g' > 0, then polished by one Newton step limited to sqrt(2 delta / M). Tables that offer a
+Hessian add a third-order certificate: g''(s) <= g''(t) + jump V^2 + K (s - t) with
+K >= |d^3 g / dt^3| (kernels.curvature_step); near a tangency that step crosses it at once; each
+step taken is the larger of the two certified ones.
+
+Degenerate cases end in a defined state (:func:`advance_m`; docs/physics.md):
+* an end on the wall still moving outward after the law (plastic with I > m R^2): the normal
+  velocity is removed (kernels.law_update);
+* accumulation (Zeno), including both ends wedged against the wall: zeno_impacts consecutive
+  impacts each within max(zeno_window, 8 sqrt(2 delta / M)) of the previous one, or
+  max_events_per_interval impacts in one interval, bring the penny to rest (theta_dot = phi_dot
+  = 0). If the controls then push an end that touches the wall outward, the penny stays pinned
+  until the interval ends.
 """
 from __future__ import annotations
 
@@ -194,7 +215,7 @@ def wall1(s, sigma, m):
 
 
 def end_plain1(x, y, c, sn, W, w, sigma, m, M):
-    """(g, g', plain certified step, end position, gradient) of one end (see events.end_step);
+    """(g, g', plain certified step, end position, gradient) of one end;
     c, sn = cos, sin of the heading."""
     R = m.R
     sR = sigma * R
@@ -205,7 +226,8 @@ def end_plain1(x, y, c, sn, W, w, sigma, m, M):
 
 
 def with_curvature1(end, c, sn, W, w, sigma, acc1, acc2, m, M, K, V2, rem):
-    """The end's step, improved by the curvature step where that can help (see events.end_step)."""
+    """The end's step, improved by the curvature step where that can help: moving away, or near a
+    tangency (curvature dominates the approach speed)."""
     g, gd, step, px, py, hx, hy = end
     if step < rem and (gd <= 0.0 or gd * gd < 2.0 * M * abs(g)):
         hxx, hxy, hyy = wall_hess(m, px, py)
@@ -248,7 +270,8 @@ def certified_free_trig(s, c, sn, acc1, acc2, dt, m):
 
 
 def first_impact_m(s0, acc1, acc2, horizon, m):
-    """(t_hit, end) as events.first_impact: end 0 = none (t_hit inf), 2 = step budget spent."""
+    """(t_hit, end) of the first impact within horizon (module docstring): end +1 front, -1 back,
+    0 none (t_hit inf), 2 step budget spent (t_hit: the time certified free so far)."""
     R = m.R
     delta = m.delta
     W_end = s0[4] + acc2 * horizon
@@ -276,7 +299,7 @@ def first_impact_m(s0, acc1, acc2, horizon, m):
             return min(max(t + newton_polish(g, gd, M, delta, SCALAR), 0.0), horizon), (1 if front else -1)
         if m.third:
             # tau = min over ends of max(plain, curvature step): the other end's curvature step only
-            # matters when the first end's step exceeds the other's plain step (same tau as events.py)
+            # matters when the first end's step exceeds the other's plain step (the same tau as taking both ends' best steps)
             rem = horizon - t
             if step_f <= step_b:
                 s1 = with_curvature1(ef, c, sn, W, w, 1.0, acc1, acc2, m, M, K, V2, rem)
@@ -352,7 +375,7 @@ def pushes_out1(s, acc1, acc2, m, delta):
 
 
 def advance_m(s, acc1, acc2, dt, m, stop_after):
-    """One penny over one control interval with walls (see advance.advance); stop_after <= 0: no limit.
+    """One penny over one control interval with walls (module docstring); stop_after <= 0: no limit.
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
     rests a list of (time, pinned)."""
@@ -406,7 +429,7 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------
 def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
-    """One penny over one control interval (see advance.advance).
+    """One penny over one control interval, from the physics objects (builds the Model).
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
     rests a list of (time, pinned)."""
