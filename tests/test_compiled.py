@@ -204,3 +204,19 @@ def test_batch_simulate_backends_agree(table, law):
     assert table is None or out[0].impact_counts.sum() > 0
     with pytest.raises(ValueError, match="backend"):
         pb.simulate(S, table=table, t_final=1.0, backend="gpu")
+
+
+@pytest.mark.parametrize("table", TABLES, ids=repr)
+def test_first_impacts_compiled_equal_python(table):
+    # the batch API's first_impact: the per-penny certified search, compiled in parallel and plain, bitwise
+    import penny_env.batch as pb
+    rng = np.random.default_rng(8)
+    params = pe.PennyParams()
+    S = np.stack([random_inside_state(rng, params, table) for _ in range(12)])
+    u = rng.normal(0, 1, (12, 2)) * np.array([params.J, params.rolling_inertia]) * 3
+    u[:4, 0] = 0.0
+    horizon = rng.uniform(0.01, 5.0, 12)
+    a = pb.first_impact(S, u, horizon, table=table, backend="numba")
+    b = pb.first_impact(S, u, horizon, table=table, backend="python")
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert np.isfinite(a[0]).any()
