@@ -1,6 +1,6 @@
 """Side-by-side timing of the compiled batch (CompiledBatch) of two checkouts of penny_env.
 
-    python benchmarks/compare_compiled_batch.py OTHER_CHECKOUT [--n 4096] [--steps 40] [--rounds 5]
+    python benchmarks/compare_compiled_batch.py OTHER_CHECKOUT [--n 4096] [--steps 40] [--rounds 5] [--clock cpu]
 
 Runs the same workload (the 4 built-in scenes' tables and laws, N pennies with random inside states
 and random torques in the scene's limits, `steps` control periods of the scene's control_dt) with
@@ -40,17 +40,18 @@ for name in ("ellipse", "circle", "stadium", "plane"):
     acc = [(rng.uniform(-1, 1, n) * lim["u1"] / params.J, rng.uniform(-1, 1, n) * lim["u2"] / params.rolling_inertia)
            for _ in range(steps)]
     run(S, acc[0][0], acc[0][1], sc.control_dt)  # warm
-    t0 = time.perf_counter()
+    clock = time.process_time if sys.argv[3] == "cpu" else time.perf_counter
+    t0 = clock()
     for a1, a2 in acc:
         S, _ = run(S, a1, a2, sc.control_dt)
-    out[name] = time.perf_counter() - t0
+    out[name] = clock() - t0
 print(json.dumps(out))
 '''
 
 
-def run(checkout, n, steps):
+def run(checkout, n, steps, clock):
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    res = subprocess.run([sys.executable, "-c", WORKER, str(n), str(steps)], env=env, cwd=str(checkout),
+    res = subprocess.run([sys.executable, "-c", WORKER, str(n), str(steps), clock], env=env, cwd=str(checkout),
                          capture_output=True, text=True, check=True)
     return json.loads(res.stdout.strip().splitlines()[-1])
 
@@ -61,15 +62,17 @@ def main():
     ap.add_argument("--n", type=int, default=4096)
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="wall time, or the process's CPU time (less sensitive to a loaded machine)")
     args = ap.parse_args()
     best = {"this": {}, "other": {}}
     for k in range(args.rounds):
         for who, path in (("other", Path(args.other).resolve()), ("this", HERE)):
-            for scene, t in run(path, args.n, args.steps).items():
+            for scene, t in run(path, args.n, args.steps, args.clock).items():
                 best[who][scene] = min(best[who].get(scene, float("inf")), t)
         print(f"round {k + 1}: " + ", ".join(f"{s} {best['this'][s] / best['other'][s]:.3f}" for s in best["this"]),
               flush=True)
-    print(f"N = {args.n}, {args.steps} control periods, best of {args.rounds} alternated runs, "
+    print(f"N = {args.n}, {args.steps} control periods, best of {args.rounds} alternated runs, {args.clock} time, "
           f"NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}")
     print("| scene | this [s] | other [s] | this / other |")
     print("|---|---|---|---|")
