@@ -71,12 +71,11 @@ class Model(NamedTuple):
     max_events: int
     kind: int            # index of the table's formulas in tables.COMPILED_FORMULAS, or OTHER
     other: int           # OTHER: the key of the table in _OTHER_TABLES
-    t0: float            # t0..t5: the table's constants (Table.constants(), zero-padded)
+    t0: float            # t0..t4: the table's constants (Table.constants(), zero-padded)
     t1: float
     t2: float
     t3: float
     t4: float
-    t5: float
 
 
 # -- the tables' formulas: wall_terms(m, x, y) -> (h, hx, hy), wall_hess(m, x, y) -> (hxx, hxy, hyy) ------
@@ -99,13 +98,13 @@ def other_hess(m, x, y):
 def wall_terms(m, x, y):
     if m.kind == OTHER:
         return other_terms(m, x, y)
-    return COMPILED_FORMULAS[m.kind][0]((m.t0, m.t1, m.t2, m.t3, m.t4, m.t5), x, y)
+    return COMPILED_FORMULAS[m.kind][0]((m.t0, m.t1, m.t2, m.t3, m.t4), x, y)
 
 
 def wall_hess(m, x, y):
     if m.kind == OTHER:
         return other_hess(m, x, y)
-    return COMPILED_FORMULAS[m.kind][1]((m.t0, m.t1, m.t2, m.t3, m.t4, m.t5), x, y)
+    return COMPILED_FORMULAS[m.kind][1]((m.t0, m.t1, m.t2, m.t3, m.t4), x, y)
 
 
 def law_terms(m, W, w, a, b, grad2):
@@ -121,7 +120,7 @@ def third_order(table):
 
 
 def table_constants(table):
-    """(kind, constants t0..t5) of a table: OTHER for a table without registered compiled formulas."""
+    """(kind, constants t0..t4) of a table: OTHER for a table without registered compiled formulas."""
     kind = compiled_kind(type(table))
     if kind == OTHER:
         return OTHER, (0.0,) * N_CONSTANTS
@@ -425,6 +424,22 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
         s = post
         if done:
             return s, impacts, rests, elapsed
+
+
+def advance_resumed(s, acc1, acc2, dt, m):
+    """advance_m over the whole interval: resumed while it stops early (its per-call work cap), the
+    impacts' times since the interval's start. Returns (state, impacts, rests, elapsed)."""
+    s1, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, 0)
+    while elapsed < dt:
+        s1, more, more_rests, e = advance_m(s1, acc1, acc2, dt - elapsed, m, 0)
+        for imp in more:
+            impacts.append((imp[0] + elapsed, imp[1], imp[2]))
+        for r in more_rests:
+            rests.append((r[0] + elapsed, r[1]))
+        if e == 0.0 and len(more) == 0:
+            break
+        elapsed += e
+    return s1, impacts, rests, elapsed
 
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------

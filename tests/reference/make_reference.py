@@ -25,6 +25,9 @@ counted).  The earliest impact over both ends wins.
 Tables: Ellipse(a, b): h = x^2/a^2 + y^2/b^2 - 1 (circle: a = b).
 Stadium(r, L): h = dist(p, [-L/2, L/2] x {0}) - r, grad h = unit vector
 from the nearest segment point to p.
+RoundedRect(W, H, r): h = dist(p, [-W/2+r, W/2-r] x [-H/2+r, H/2-r]) - r (four
+corner circles and four straight sides, each a quadric piece for the polynomial
+impact search).
 
 Impact laws (configuration unchanged, only velocities jump)
 -----------------------------------------------------------

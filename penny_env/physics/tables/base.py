@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-N_CONSTANTS = 6  # the constants a compiled table formula receives (Table.constants, zero-padded)
+N_CONSTANTS = 5  # the constants a compiled table formula receives (Table.constants, zero-padded)
 
 
 class Table:

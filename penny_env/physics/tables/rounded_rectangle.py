@@ -7,16 +7,16 @@ from .base import Table, length, register_table
 
 
 def rounded_rectangle_terms(c, x, y):
-    """(h, hx, hy); c = (ax, ay, radius, radius^2, 2 radius, 1/radius), (ax, ay) the half-sizes of
-    the inner rectangle (the corners' centres)."""
-    ax, ay, r, r2, two_r = c[0], c[1], c[2], c[3], c[4]
+    """(h, hx, hy); c = (ax, ay, radius, 2 radius, 1/radius), (ax, ay) the half-sizes of the inner
+    rectangle (the corners' centres)."""
+    ax, ay, r, two_r = c[0], c[1], c[2], c[3]
     dx = x - min(max(x, -ax), ax)
     dy = y - min(max(y, -ay), ay)
-    return (dx * dx + dy * dy - r2) / two_r, dx / r, dy / r
+    return (dx * dx + dy * dy - r * r) / two_r, dx / r, dy / r
 
 
 def rounded_rectangle_hess(c, x, y):
-    ax, ay, inv = c[0], c[1], c[5]
+    ax, ay, inv = c[0], c[1], c[4]
     return ((inv if x - min(max(x, -ax), ax) != 0.0 else 0.0), 0.0,
             (inv if y - min(max(y, -ay), ay) != 0.0 else 0.0))
 
@@ -58,7 +58,7 @@ class RoundedRectangle(Table):
 
     def constants(self):
         r = self.radius
-        return (self._ax, self._ay, r, r * r, 2.0 * r, 1.0 / r)
+        return (self._ax, self._ay, r, 2.0 * r, 1.0 / r)
 
     def _offset(self, x, y):
         # vector from the nearest point of the inner rectangle
@@ -68,7 +68,7 @@ class RoundedRectangle(Table):
 
     def h(self, x, y):
         dx, dy = self._offset(x, y)
-        return (dx * dx + dy * dy - self.radius ** 2) / (2.0 * self.radius)
+        return (dx * dx + dy * dy - self.radius * self.radius) / (2.0 * self.radius)
 
     def grad(self, x, y):
         dx, dy = self._offset(x, y)
