@@ -401,7 +401,9 @@ def _long(quick):
     calls = 0
     finite = True
     while counts.sum() < N * K:
-        S, log, _ = advance_pennies(S, 0.0, 0.0, 0.25, params, table, law, settings, backend="auto")
+        # the plain-Python per-penny loop: cases run in forked workers, where numba's OpenMP
+        # threads (used by the parent earlier) would abort the child
+        S, log, _ = advance_pennies(S, 0.0, 0.0, 0.25, params, table, law, settings, backend="python")
         calls += 1
         counts += log.counts(N)
         if log.state.shape[0]:
