@@ -24,7 +24,7 @@ import numpy as np
 import penny_env as pe
 from penny_env.envs import resolve
 from penny_env.physics.compiled import CompiledBatch
-n, steps = int(sys.argv[1]), int(sys.argv[2])
+n, steps, speed = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[4])
 out = {}
 for name in ("ellipse", "circle", "stadium", "plane"):
     sc, _ = resolve(scene=name, task="reach")
@@ -35,7 +35,7 @@ for name in ("ellipse", "circle", "stadium", "plane"):
     ax, ay = (0.1, 0.1) if table is None else sc.spawn_axes()
     r = 0.7 * np.sqrt(rng.uniform(size=n)); a = rng.uniform(0, 2 * np.pi, n)
     S = np.stack([r * ax * np.cos(a), r * ay * np.sin(a), rng.uniform(-3, 3, n), rng.uniform(-3, 3, n),
-                  rng.uniform(-20, 20, n), rng.uniform(-5, 5, n)])
+                  rng.uniform(-20, 20, n) * speed, rng.uniform(-5, 5, n)])
     lim = sc.torque_limits
     acc = [(rng.uniform(-1, 1, n) * lim["u1"] / params.J, rng.uniform(-1, 1, n) * lim["u2"] / params.rolling_inertia)
            for _ in range(steps)]
@@ -49,9 +49,9 @@ print(json.dumps(out))
 '''
 
 
-def run(checkout, n, steps, clock):
+def run(checkout, n, steps, clock, speed):
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    res = subprocess.run([sys.executable, "-c", WORKER, str(n), str(steps), clock], env=env, cwd=str(checkout),
+    res = subprocess.run([sys.executable, "-c", WORKER, str(n), str(steps), clock, str(speed)], env=env, cwd=str(checkout),
                          capture_output=True, text=True, check=True)
     return json.loads(res.stdout.strip().splitlines()[-1])
 
@@ -62,17 +62,19 @@ def main():
     ap.add_argument("--n", type=int, default=4096)
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--speed", type=float, default=1.0,
+                    help="scale of the initial rolling rates (theta_dot in +-20 rad/s times this): fewer impacts below 1")
     ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                     help="wall time, or the process's CPU time (less sensitive to a loaded machine)")
     args = ap.parse_args()
     best = {"this": {}, "other": {}}
     for k in range(args.rounds):
         for who, path in (("other", Path(args.other).resolve()), ("this", HERE)):
-            for scene, t in run(path, args.n, args.steps, args.clock).items():
+            for scene, t in run(path, args.n, args.steps, args.clock, args.speed).items():
                 best[who][scene] = min(best[who].get(scene, float("inf")), t)
         print(f"round {k + 1}: " + ", ".join(f"{s} {best['this'][s] / best['other'][s]:.3f}" for s in best["this"]),
               flush=True)
-    print(f"N = {args.n}, {args.steps} control periods, best of {args.rounds} alternated runs, {args.clock} time, "
+    print(f"N = {args.n}, {args.steps} control periods, best of {args.rounds} alternated runs, {args.clock} time, speed {args.speed}, "
           f"NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}")
     print("| scene | this [s] | other [s] | this / other |")
     print("|---|---|---|---|")
