@@ -18,9 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .physics import SolverSettings, advance, make_law, make_table  # noqa: F401 (make_table re-exported)
-from .physics import apply_law, end_kinematics
-from .physics import first_impact as _first_impact
+from .physics import SolverSettings, make_law, make_table  # noqa: F401 (make_table re-exported)
+from .physics import advance_pennies, apply_law, end_kinematics, first_impacts
 from .physics import flow as _flow
 from .physics.validation import as_states, check_inside, check_params, check_table, positive_time
 
@@ -77,9 +76,10 @@ def flow(states, controls, t, *, params=None) -> np.ndarray:
     return _flow(S, acc1, acc2, _times(t, n, "t"), params.R).T.copy()
 
 
-def first_impact(states, controls, horizon, *, params=None, table, settings=None):
+def first_impact(states, controls, horizon, *, params=None, table, settings=None, backend="auto"):
     """(t_hit, end) of the first impact within horizon (scalar or (N,)) under constant torques:
-    t_hit (N,) [s] (inf where none), end (N,) int8: +1 front, -1 back, 0 none."""
+    t_hit (N,) [s] (inf where none), end (N,) int8: +1 front, -1 back, 0 none. backend as for
+    :func:`simulate` (the physics' per-penny search, physics.scalar.first_impact_resumed)."""
     params = check_params(params)
     if table is None:
         raise ValueError("table: first_impact needs a table (the open plane has no walls)")
@@ -90,20 +90,7 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     acc1, acc2 = _controls(controls, n, params)
     h = _times(horizon, n, "horizon")
     settings = settings or SolverSettings()
-    acc1, acc2 = np.ascontiguousarray(acc1), np.ascontiguousarray(acc2)
-    t_hit, end = _first_impact(S, acc1, acc2, h, params, tab, settings)
-    # a search that spent its step budget (end 2) resumes from the time it certified, a bounded number of times
-    start = np.zeros(n)
-    for _ in range(64):
-        open_ = np.flatnonzero(end == 2)
-        if open_.size == 0:
-            break
-        start[open_] += t_hit[open_]
-        S_open = _flow(S[:, open_], acc1[open_], acc2[open_], start[open_], params.R)
-        t2, e2 = _first_impact(S_open, acc1[open_], acc2[open_], h[open_] - start[open_], params, tab, settings)
-        t_hit[open_], end[open_] = t2, e2
-    t_hit = np.where(end == 0, np.inf, start + t_hit)
-    return np.where(end == 2, np.inf, t_hit), np.where(end == 2, 0, end).astype(np.int8)
+    return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=_backend(backend))
 
 
 def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray:
@@ -150,15 +137,21 @@ class BatchResult:
         return self.impact_times[self.impact_env == i]
 
 
+def _backend(backend):
+    if backend not in ("auto", "numba", "python"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
+    return backend
+
+
 def _stepper(params, table, law, settings, backend):
-    """advance() over one interval for (6, N) states: (new S, None or (env, time, end, post))."""
+    """The event loop over one interval for (6, N) states: (new S, None or (env, time, end, post))."""
     from .physics.compiled import CompiledBatch, choose_backend
 
-    if choose_backend(backend, params, table, law, settings) == "numba":
-        return CompiledBatch(params, table, law, settings).advance
+    if choose_backend(_backend(backend), params, table, law, settings, python="python") == "numba":
+        return CompiledBatch(params, table, law, settings).states_and_impacts
 
     def step(S, acc1, acc2, dt):
-        S, log, _ = advance(S, acc1, acc2, dt, params, table, law, settings)
+        S, log, _ = advance_pennies(S, acc1, acc2, dt, params, table, law, settings, backend="python")
         return S, (None if log.env.size == 0 else (log.env, log.time, log.end, log.state))
     return step
 
@@ -168,9 +161,10 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     """Simulate N pennies to t_final with every impact, batched (a loop over control intervals,
     never over pennies). controls: None (free motion), (K, 2) torques shared by all pennies or
     (K, N, 2) per penny, row k held on [k, k+1) control_dt; K control_dt must cover t_final.
-    backend: "numba" runs the physics' scalar loop compiled and in parallel over the pennies
-    (physics/compiled.py), "numpy" the array event loop; "auto" (default) takes numba where it is
-    installed and the table compiles. Both give bitwise the same results (tests/test_compiled.py)."""
+    backend: "numba" runs the physics' per-penny event loop compiled and in parallel over the pennies
+    (physics/compiled.py), "python" the same loop in plain Python (slow: for debugging and tests);
+    "auto" (default) takes numba where it is installed and the table compiles (with a one-time
+    warning otherwise). Both give bitwise the same results (tests/test_compiled.py)."""
     params = check_params(params)
     tab = _table(table, params)
     law = make_law(law)

@@ -1,5 +1,6 @@
-"""The compiled backend (numba) runs physics/scalar.py's functions: it must give the numpy batch's
-and the plain-Python loop's results bitwise, impacts included, and refuse what it cannot compile."""
+"""The compiled backend (numba) runs physics/scalar.py's functions: it must give the plain-Python
+per-penny loop's results bitwise (advance_pennies(backend="python") and advance1), impacts included,
+and refuse what it cannot compile."""
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 import penny_env as pe
 from penny_env import PennyEnv, PennyVectorEnv
-from penny_env.physics import advance, flow
+from penny_env.physics import advance_pennies, flow
 from penny_env.physics.compiled import IMPACT_CAPACITY, CompiledBatch, available, compiled_functions
 from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis_small
 from penny_env.physics.laws import make_law
@@ -19,7 +20,8 @@ from conftest import random_inside_state
 
 pytestmark = pytest.mark.skipif(not available(), reason="numba is not installed")
 
-TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011), pe.Stadium(0.05, 0.0)]
+TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011), pe.Stadium(0.05, 0.0),
+          pe.RoundedRectangle(0.3, 0.2, 0.05), pe.RoundedRectangle(0.06, 0.025, 0.012)]
 LAWS = ["elastic", "plastic", 0.4]
 SET = SolverSettings()
 
@@ -27,7 +29,7 @@ SET = SolverSettings()
 @hsettings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
        steer=st.booleans(), dt=st.sampled_from([0.05, 0.5, 3.0]))
-def test_compiled_equals_numpy_batch_and_scalar(seed, table, law, steer, dt):
+def test_compiled_equals_python_loop_and_scalar(seed, table, law, steer, dt):
     rng = np.random.default_rng(seed)
     params = pe.PennyParams()
     law = make_law(law)
@@ -35,9 +37,9 @@ def test_compiled_equals_numpy_batch_and_scalar(seed, table, law, steer, dt):
     S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
     acc1 = rng.normal(0, 3, n) * steer
     acc2 = rng.normal(0, 3, n)
-    ref, log, _ = advance(S, acc1, acc2, dt, params, table, law, SET)
+    ref, log, _ = advance_pennies(S, acc1, acc2, dt, params, table, law, SET, backend="python")
     trig = np.empty((4, n))
-    out, clog = CompiledBatch(params, table, law, SET).advance(S, acc1, acc2, dt, trig)
+    out, clog = CompiledBatch(params, table, law, SET).states_and_impacts(S, acc1, acc2, dt, trig)
     assert np.array_equal(out, ref)
     assert np.array_equal(trig, np.stack([np.cos(ref[2]), np.sin(ref[2]), np.cos(ref[3]), np.sin(ref[3])]))
     if log.env.size == 0:
@@ -57,18 +59,18 @@ def test_impact_buffer_overflow_is_complete():
     params, table, law = pe.PennyParams(), pe.Ellipse(0.03, 0.011), make_law("elastic")
     S = np.stack([random_inside_state(rng, params, table) for _ in range(5)], axis=1)
     acc1, acc2 = rng.normal(0, 3, 5), rng.normal(0, 3, 5)
-    ref, log, _ = advance(S, acc1, acc2, 3.0, params, table, law, SET)
-    out, (env, times, ends, posts) = CompiledBatch(params, table, law, SET).advance(S, acc1, acc2, 3.0)
+    ref, log, _ = advance_pennies(S, acc1, acc2, 3.0, params, table, law, SET, backend="python")
+    out, (env, times, ends, posts) = CompiledBatch(params, table, law, SET).states_and_impacts(S, acc1, acc2, 3.0)
     assert np.bincount(log.env).max() > IMPACT_CAPACITY
     assert np.array_equal(out, ref) and np.array_equal(times, log.time) and np.array_equal(posts, log.state)
 
 
 @given(seed=st.integers(0, 2**31 - 1), steer=st.booleans())
-def test_compiled_flow_on_the_plane_equals_numpy(seed, steer):
+def test_compiled_flow_on_the_plane_equals_numpy_flow(seed, steer):
     rng = np.random.default_rng(seed)
     S = rng.normal(size=(6, 7)) * np.array([0.1, 0.1, 1, 3, 20, 10])[:, None]
     acc1, acc2 = rng.normal(0, 10, 7) * steer, rng.normal(0, 40, 7)
-    out, log = CompiledBatch(pe.PennyParams(), None, make_law("elastic"), SET).advance(S, acc1, acc2, 0.37)
+    out, log = CompiledBatch(pe.PennyParams(), None, make_law("elastic"), SET).states_and_impacts(S, acc1, acc2, 0.37)
     assert log is None
     assert np.array_equal(out, flow(S, acc1, acc2, 0.37, 0.01))
     fns = compiled_functions()
@@ -196,9 +198,25 @@ def test_batch_simulate_backends_agree(table, law):
     S[:, 5] = rng.uniform(-2, 2, 40)
     u = rng.choice((-1.0, 1.0), (30, 40, 2)) * np.array([6.25e-7, 1.5e-5])
     out = [pb.simulate(S, table=table, law=law, t_final=1.5, controls=u, control_dt=0.05, backend=b)
-           for b in ("numba", "numpy")]
+           for b in ("numba", "python")]
     for field in ("final_states", "impact_counts", "impact_env", "impact_times", "impact_ends", "impact_states"):
         assert np.array_equal(getattr(out[0], field), getattr(out[1], field)), field
     assert table is None or out[0].impact_counts.sum() > 0
     with pytest.raises(ValueError, match="backend"):
         pb.simulate(S, table=table, t_final=1.0, backend="gpu")
+
+
+@pytest.mark.parametrize("table", TABLES, ids=repr)
+def test_first_impacts_compiled_equal_python(table):
+    # the batch API's first_impact: the per-penny certified search, compiled in parallel and plain, bitwise
+    import penny_env.batch as pb
+    rng = np.random.default_rng(8)
+    params = pe.PennyParams()
+    S = np.stack([random_inside_state(rng, params, table) for _ in range(12)])
+    u = rng.normal(0, 1, (12, 2)) * np.array([params.J, params.rolling_inertia]) * 3
+    u[:4, 0] = 0.0
+    horizon = rng.uniform(0.01, 5.0, 12)
+    a = pb.first_impact(S, u, horizon, table=table, backend="numba")
+    b = pb.first_impact(S, u, horizon, table=table, backend="python")
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert np.isfinite(a[0]).any()

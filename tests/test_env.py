@@ -25,7 +25,7 @@ def test_ids_cover_tasks_scenes_laws_actuations():
         sc, tk = resolve(**kw)
         scenes.add(sc.table["kind"]); tasks.add(tk.kind); acts.add(sc.actuation)
         laws.add(sc.law if isinstance(sc.law, str) else "restitution")
-    assert scenes == {"ellipse", "circle", "stadium", "none"}
+    assert scenes == {"ellipse", "circle", "stadium", "rounded_rectangle", "none"}
     assert tasks == {"reach", "park", "impacts"}
     assert laws == {"elastic", "plastic", "restitution"}
     assert acts == {"both", "steer", "drive"}

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from penny_env.envs import fast_path as fp
-from penny_env.physics import PennyParams, SolverSettings, advance, flow, make_law, make_table
+from penny_env.physics import PennyParams, SolverSettings, advance_pennies, flow, make_law, make_table
 
 P = PennyParams()
 SET = SolverSettings()
@@ -42,7 +42,7 @@ def test_scalar_advance_and_certificate_bitwise(ti):
     one = fp.ScalarPhysics(P, table, make_law("elastic"), SET)
     assert [one.certified_free(tuple(S[:, i]), float(acc1[i]), float(acc2[i]), dt) for i in range(n)] == free.tolist()
     for law in (make_law("elastic"), make_law("plastic"), make_law(0.5)):
-        new, log, _ = advance(S, acc1, acc2, dt, P, table, law, SET)
+        new, log, _ = advance_pennies(S, acc1, acc2, dt, P, table, law, SET)
         assert log.env.size > 5  # impacts do happen
         assert not np.isin(np.flatnonzero(free), log.env).any()
         # certified pennies: advance() is the plain flow, bitwise

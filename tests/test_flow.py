@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from penny_env.physics.flow import RULE_LIMITS, flow
+from penny_env.physics.flows import RULE_LIMITS, flow
 from penny_env.physics.kernels import sinc_kernels
 
 R = 0.01

@@ -4,7 +4,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 import penny_env as pe
-from penny_env.physics.flow import kinetic_energy
+from penny_env.physics.flows import kinetic_energy
 
 
 def on_wall_state(rng, params, table, end):

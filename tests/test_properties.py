@@ -6,13 +6,16 @@ import pytest
 from hypothesis import given, strategies as st
 
 import penny_env as pe
-from penny_env.physics.flow import kinetic_energy
+from penny_env.physics.flows import kinetic_energy
 from conftest import random_inside_state
 
 tables_st = st.one_of(
     st.builds(pe.Ellipse, st.floats(0.05, 0.5), st.floats(0.05, 0.5)),
     st.builds(pe.Circle, st.floats(0.05, 0.5)),
     st.builds(pe.Stadium, st.floats(0.05, 0.3), st.floats(0.0, 0.5)),
+    # rounded rectangles from a stadium-like radius = min/2 down to nearly sharp corners
+    st.builds(lambda w, hgt, f: pe.RoundedRectangle(w, hgt, f * 0.5 * min(w, hgt)),
+              st.floats(0.06, 0.6), st.floats(0.06, 0.6), st.floats(0.02, 1.0)),
 )
 params_st = st.builds(
     lambda R, m, ri, rj: pe.PennyParams(R=R, m=m, I=ri * m * R * R, J=rj * m * R * R),
@@ -181,7 +184,10 @@ def test_protocol_object_as_table():
     np.testing.assert_allclose(mine.impact_times, ref.impact_times, rtol=1e-12)
     # the batch API and the environments take it too
     from penny_env import batch
-    out = batch.simulate(np.array([s0]), table=_CircleByProtocol(), law="elastic", t_final=2.0)
+    from penny_env.physics import compiled
+    compiled._WARNED.discard(type(pe.physics.tables.as_table(_CircleByProtocol())))
+    with pytest.warns(RuntimeWarning, match="plain-Python event loop"):  # no compiled formulas: said once
+        out = batch.simulate(np.array([s0]), table=_CircleByProtocol(), law="elastic", t_final=2.0)
     assert out is not None
     bad = _CircleByProtocol()
     bad.grad_bound = -1.0
@@ -192,3 +198,16 @@ def test_protocol_object_as_table():
             return x
     with pytest.raises(TypeError, match="grad"):
         pe.simulate(s0, table=Incomplete(), t_final=1.0)
+
+
+@given(w=st.floats(0.06, 0.6), hgt=st.floats(0.06, 0.6), f=st.floats(0.01, 1.0), seed=st.integers(0, 2**31 - 1),
+       speed=st.sampled_from([1.0, 30.0, 300.0]))
+def test_rounded_rectangle_no_escape_and_elastic_energy_kept(w, hgt, f, seed, speed):
+    # corners from nearly sharp (radius 1% of the half-width) to fully round: the penny stays in, energy stays
+    params, table = pe.PennyParams(), pe.RoundedRectangle(w, hgt, f * 0.5 * min(w, hgt))
+    rng = np.random.default_rng(seed)
+    s0 = random_inside_state(rng, params, table, speed=speed, spin=speed)
+    tr = pe.simulate(s0, params=params, table=table, law="elastic", t_final=2.0)
+    assert max_wall_value(tr, params, table, n=2000) <= 64 * 2.2e-16 * table.size
+    if not len(tr.rest_times):
+        np.testing.assert_allclose(tr.energies(), kinetic_energy(s0[:, None], params)[0], rtol=1e-12)

@@ -1,16 +1,21 @@
-"""The scalar event loop (single env, simulate) and the batched one (vector env) agree bitwise."""
+"""The per-penny event loop (single env, simulate) and its batch runs (advance_pennies, plain Python
+and compiled) agree bitwise."""
 import numpy as np
 from hypothesis import given, strategies as st
 
 import penny_env as pe
-from penny_env.physics import advance, flow
+from penny_env.physics import advance_pennies, flow
 from penny_env.physics.laws import make_law
+from penny_env.physics.compiled import available
 from penny_env.physics.params import SolverSettings
 from penny_env.physics.scalar import advance1, flow1
 from conftest import random_inside_state
 
-TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011)]
+TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011),
+          pe.RoundedRectangle(0.3, 0.2, 0.05)]
 LAWS = ["elastic", "plastic", 0.4]
+# the batch runs compiled where numba is installed (the plain-Python batch is advance1 in a loop)
+BACKEND = "numba" if available() else "python"
 
 
 @given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
@@ -24,7 +29,7 @@ def test_advance_scalar_equals_batch(seed, table, law, steer, dt):
     S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
     acc1 = rng.normal(0, 3, n) * steer
     acc2 = rng.normal(0, 3, n)
-    batch, log, elapsed = advance(S, acc1, acc2, dt, params, table, law, settings)
+    batch, log, elapsed = advance_pennies(S, acc1, acc2, dt, params, table, law, settings, backend=BACKEND)
     for i in range(n):
         s1, impacts, rests, el = advance1(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, settings)
         assert np.array_equal(np.array(s1), batch[:, i])
@@ -53,6 +58,6 @@ def test_batch_result_independent_of_batch_composition():
     params, table, law = pe.PennyParams(), pe.Ellipse(0.15, 0.2), make_law("elastic")
     S = np.stack([random_inside_state(rng, params, table) for _ in range(8)], axis=1)
     acc1, acc2 = rng.normal(0, 2, 8), rng.normal(0, 2, 8)
-    full, _, _ = advance(S, acc1, acc2, 1.0, params, table, law, SolverSettings())
-    part, _, _ = advance(S[:, 2:5], acc1[2:5], acc2[2:5], 1.0, params, table, law, SolverSettings())
+    full, _, _ = advance_pennies(S, acc1, acc2, 1.0, params, table, law, SolverSettings(), backend=BACKEND)
+    part, _, _ = advance_pennies(S[:, 2:5], acc1[2:5], acc2[2:5], 1.0, params, table, law, SolverSettings(), backend=BACKEND)
     assert np.array_equal(full[:, 2:5], part)

@@ -15,7 +15,7 @@ event location, not the impact maps.
   (h < 0 -> h >= 0) is located by linear interpolation of h between the step ends, the state
   there is recomputed by an RK4 step of that length, the law is applied and stepping resumes.
 * :func:`run_simulate` / :func:`run_step_path` - penny_env.simulate and the environment's step path
-  (penny_env.physics.advance over fixed control intervals) with the same interface.
+  (penny_env.physics.advance_pennies over fixed control intervals) with the same interface.
 
 All runners take the same stopping rules: stop once ``n_impacts`` impacts were found and the
 time ``t_sample`` was passed (the state there is recorded), or at the hard stop ``t_stop``, or when
@@ -29,8 +29,8 @@ import time
 
 import numpy as np
 
-from ..physics import SolverSettings, advance, simulate
-from ..physics.flow import end_kinematics, kinetic_energy
+from ..physics import SolverSettings, advance_pennies, simulate
+from ..physics.flows import end_kinematics, kinetic_energy
 from ..physics.laws import apply_law, make_law
 
 
@@ -304,9 +304,9 @@ def run_simulate(state, *, params, table, law, n_impacts=None, t_stop, t_sample=
 def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample=None, controls=None,
                   control_dt=None, env_dt=0.05, settings: SolverSettings | None = None,
                   wall_budget=None, scalar: bool = False) -> HybridResult:
-    """The environment's step path: penny_env.physics.advance on a batch of one over intervals of env_dt
+    """The environment's step path: penny_env.physics.advance_pennies on a batch of one over intervals of env_dt
     (scalar=True: penny_env.physics.scalar.advance1, the plain-float event loop of the single env's fast
-    path, bitwise equal to advance)."""
+    path, bitwise equal to advance_pennies)."""
     if scalar:
         from ..physics.scalar import advance1
     _check_stop(n_impacts, t_stop, t_sample)
@@ -342,7 +342,7 @@ def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample
                 ends.append(int(end))
                 states.append(np.array(post, dtype=float))
         else:
-            S, log, _ = advance(S, a1, a2, t_next - t, params, table, law, settings)
+            S, log, _ = advance_pennies(S, a1, a2, t_next - t, params, table, law, settings, backend="auto")
             for i in range(log.time.shape[0]):
                 times.append(t + float(log.time[i]))
                 ends.append(int(log.end[i]))

@@ -27,7 +27,7 @@ OUTSIDE_TOL = 1e-12  # m: an end further out than this at the end of a run has l
 
 def _outside(res, sc) -> float:
     """Largest h of the two ends at the method's final state (> 0: the penny left the table)."""
-    from ..physics.flow import end_kinematics
+    from ..physics.flows import end_kinematics
     s = np.asarray(res.final_state, float)[:, None]
     return max(float(sc.table.h(*end_kinematics(s, sg, sc.params.R)[:2])[0]) for sg in (1.0, -1.0))
 

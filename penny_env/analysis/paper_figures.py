@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import penny_env as pe
-from penny_env.physics import advance, make_law
+from penny_env.physics import advance_pennies, make_law
 from penny_env.physics.params import SolverSettings
 from penny_env.analysis.common import header
 
@@ -53,7 +53,7 @@ def chaos(times, n=100, seed=0, params=pe.PennyParams(), table=pe.Ellipse(0.15, 
     law, settings = make_law("elastic"), SolverSettings()
     for target in times:
         if target > t:
-            S, _, _ = advance(S, 0.0, 0.0, target - t, params, table, law, settings)
+            S, _, _ = advance_pennies(S, 0.0, 0.0, target - t, params, table, law, settings, backend="auto")
             t = target
         out.append(S.copy())
     return out

@@ -185,22 +185,23 @@ def wall_excursions(sc: Scene, window: float = 1e-2) -> np.ndarray:
     of h along the free flight near the impact time, located by bisection on dh/dt). Impacts
     whose excursion is below SolverSettings().contact_tol x table size cannot be resolved in
     float64 (the whole grazing event is inside the round-off of h). nan for controlled scenes."""
-    from ..physics.events import wall_value
-    from ..physics.flow import flow
+    from ..physics.params import SolverSettings
+    from ..physics.scalar import flow1, scalar_model, wall1
     out = np.full(sc.n_impacts, np.nan)
     if sc.controls is not None:
         return out
     P, T = sc.params, sc.table
+    model = scalar_model(P, T, make_law("elastic"), SolverSettings())
     for i in range(sc.n_impacts):
-        s = (sc.impact_states[i - 1] if i > 0 else sc.initial_state)[:, None]
+        s = tuple(float(v) for v in (sc.impact_states[i - 1] if i > 0 else sc.initial_state))
         t0 = float(sc.impact_times[i - 1]) if i > 0 else 0.0
         sig = float(sc.impact_ends[i])
         tc = float(sc.impact_times[i]) - t0
         lo, hi = max(tc - window, 0.0), tc + window
 
         def g(t):
-            v, d = wall_value(flow(s, 0.0, 0.0, t, P.R), sig, P, T)
-            return float(v[0]), float(d[0])
+            v, d = wall1(flow1(s, 0.0, 0.0, t, P.R), sig, model)
+            return float(v), float(d)
         if g(hi)[1] > 0:  # still rising at the window's end: a transversal impact, not grazing
             out[i] = np.inf
             continue

@@ -26,8 +26,8 @@ import traceback
 import numpy as np
 
 from . import common
-from ..physics import Circle, Ellipse, PennyParams, SolverSettings, Stadium, advance, simulate
-from ..physics.flow import end_kinematics, flow, kinetic_energy
+from ..physics import Circle, Ellipse, PennyParams, SolverSettings, Stadium, advance_pennies, simulate
+from ..physics.flows import end_kinematics, flow, kinetic_energy
 from ..physics.laws import make_law, normal_form
 
 EPS = 2.220446049250313e-16
@@ -380,7 +380,7 @@ def _tight(quick):
     return out
 
 
-@case("long horizon (batched advance)", "N elastic pennies on the paper's ellipse advanced with penny_env.physics.advance (intervals of 0.25 s) until N x K impacts in total (1000 x 1000 = 1e6; --quick: 100 x 100): energy drift, penetration, impacts per second")
+@case("long horizon (batched advance)", "N elastic pennies on the paper's ellipse advanced with penny_env.physics.advance_pennies (intervals of 0.25 s) until N x K impacts in total (1000 x 1000 = 1e6; --quick: 100 x 100): energy drift, penetration, impacts per second")
 def _long(quick):
     N, K = (1000, 1000) if not quick else (100, 100)
     params = PennyParams()
@@ -401,7 +401,9 @@ def _long(quick):
     calls = 0
     finite = True
     while counts.sum() < N * K:
-        S, log, _ = advance(S, 0.0, 0.0, 0.25, params, table, law, settings)
+        # the plain-Python per-penny loop: cases run in forked workers, where numba's OpenMP
+        # threads (used by the parent earlier) would abort the child
+        S, log, _ = advance_pennies(S, 0.0, 0.0, 0.25, params, table, law, settings, backend="python")
         calls += 1
         counts += log.counts(N)
         if log.state.shape[0]:
@@ -416,7 +418,7 @@ def _long(quick):
     m = dict(pennies=N, impacts=int(counts.sum()), min_impacts_per_penny=int(counts.min()), advance_calls=calls,
              wall_s=wall, impacts_per_s=counts.sum() / wall, energy_drift=drift, penetration=pen, finite=finite)
     ok, why = check(m, table, drift_tol=1e-10)
-    repro = (f"see penny_env/analysis/stability.py::_long (N={N}, K={K}, seed 12345, advance(S, 0, 0, 0.25, ...))")
+    repro = (f"see penny_env/analysis/stability.py::_long (N={N}, K={K}, seed 12345, advance_pennies(S, 0, 0, 0.25, ...))")
     return [dict(measured=m, passed=ok, reasons=why, repro=repro, label=f"{N} pennies, {N * K:.0e} impacts in total")]
 
 

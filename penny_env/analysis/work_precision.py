@@ -9,7 +9,7 @@ error over matched impacts, missed / spurious impacts, max abs error of the stat
 and the wall time (best of repeats for fast runs).
 
 Methods: penny_env.simulate (default settings, and a sweep of SolverSettings.contact_tol); the
-environment's step path (penny_env.physics.advance over control intervals of 0.05 s, batch of one);
+environment's step path (penny_env.physics.advance_pennies over control intervals of 0.05 s, batch of one);
 scipy solve_ivp RK45 and DOP853 with rtol 1e-4 ... 1e-12 (atol = 1e-3 rtol (L, L, 1, 1, 1, 1));
 fixed-step RK4 with a linear event locator at several step sizes. The diagram (log-log, error vs
 run time, one line per method, one panel per scene) goes next to the Markdown file as

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics import SolverSettings, advance, flow
+from ..physics import SolverSettings, flow
+from ..physics import advance_pennies as advance  # the plain-Python per-penny loop
 from .fast_path import ScalarPhysics, certified_free
 from .scene import Scene, Task, ConfigError
 from .tasks import task_constants
@@ -133,24 +134,8 @@ class Core:
         return S, target, arc
 
     def _wall_radius(self, c, s):
-        """Distance from the centre to the wall along (c, s) (ellipse, circle, stadium)."""
-        t = self.scene.table
-        if t["kind"] in ("ellipse", "circle"):
-            a, b = self.ax, self.ay
-            return 1.0 / np.sqrt(c * c / (a * a) + s * s / (b * b))
-        if t["kind"] == "stadium":
-            r, half = float(t["radius"]), 0.5 * float(t["length"])
-            with np.errstate(divide="ignore"):
-                side = r / np.abs(s)
-            cap = np.abs(c) * half + np.sqrt(r * r - half * half * s * s)
-            return np.where(side * np.abs(c) <= half, side, cap)
-        # custom tables: bisection on h along the ray
-        lo, hi = np.zeros_like(c), np.full_like(c, 2.0 * self.table.size)
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            inside = self.table.h(mid * c, mid * s) < 0
-            lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
-        return lo
+        """Distance from the centre to the wall along (c, s) (the table's own wall_distance)."""
+        return self.table.wall_distance(c, s)
 
     # -- actions -------------------------------------------------------------------------
     def accelerations(self, a):
@@ -201,7 +186,7 @@ class Core:
 
         The open plane is one closed-form (or quadrature) flow. With walls, the pennies whose first
         certified search step excludes an impact are flowed directly (what advance() would do),
-        the others go through physics.advance()."""
+        the others go through physics.advance_pennies()."""
         if self.plane:
             return flow(S, acc1, acc2, self.dt, self.R), None
         free = certified_free(S, acc1, acc2, self.dt, self.params, self.table, self.settings)

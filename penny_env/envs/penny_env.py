@@ -9,7 +9,7 @@ import gymnasium as gym
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from ..physics import advance as _advance_batch
+from ..physics import advance_pennies as _advance_batch
 from ..physics.validation import as_state, check_inside
 from .core import Core, seed_keys
 from .scene import resolve

@@ -90,7 +90,10 @@ class Scene:
     """The physical setting of an environment (see penny_env/presets/scenes/*.yaml).
 
     table:        {"kind": "ellipse", "a", "b"} | {"kind": "circle", "r"} |
-                  {"kind": "stadium", "radius", "length"} | {"kind": "none"} (the open plane)
+                  {"kind": "stadium", "radius", "length"} |
+                  {"kind": "rounded_rectangle", "width", "height", "radius"} | any registered kind
+                  (physics.tables.TABLE_KINDS) | {"kind": "none"} (the open plane); or a table object
+                  (a ConvexTable, a RoundedRectangle, any object following the table protocol)
     law:          "elastic" | "plastic" | restitution coefficient e in [0, 1]
     actuation:    "both" (u1 steering and u2 rolling torque) | "steer" (u1 only) | "drive" (u2 only)
     params:       the penny's {R, m, I, J} (the paper's US penny by default)
@@ -119,13 +122,14 @@ class Scene:
         table = self.table
         if table is None:
             table = {"kind": "none"}
-        if not isinstance(table, dict):
-            raise ConfigError(f"{o}.table must be a mapping with a 'kind', got {table!r}")
+        if isinstance(table, (str, int, float, list, tuple)):
+            raise ConfigError(f"{o}.table must be a mapping with a 'kind' or a table object, got {table!r}")
         try:
-            t = make_table(dict(table))
+            t = make_table(dict(table) if isinstance(table, dict) else table)
         except (ValueError, TypeError) as exc:
             raise ConfigError(f"{o}.table: {exc}") from None
-        object.__setattr__(self, "table", dict(table))
+        # a dict spec is kept as given (YAML, repr); a table object is kept as the checked Table
+        object.__setattr__(self, "table", dict(table) if isinstance(table, dict) else t)
         try:
             law = make_law(self.law)
         except (ValueError, TypeError) as exc:
@@ -160,7 +164,7 @@ class Scene:
 
     # derived objects ---------------------------------------------------------------------
     def make_table(self) -> Table | None:
-        return make_table(dict(self.table))
+        return make_table(dict(self.table)) if isinstance(self.table, dict) else self.table
 
     def make_law(self):
         return make_law(self.law)
@@ -175,19 +179,15 @@ class Scene:
 
     @property
     def has_walls(self) -> bool:
+        if not isinstance(self.table, dict):
+            return True
         return self.table.get("kind", "none") not in ("none", "plane", None)
 
     def spawn_axes(self) -> tuple[float, float]:
-        """Semi-axes of the spawn ellipse E (inside the table, containing the inscribed disk)."""
-        t = self.table
-        kind = t.get("kind")
-        if kind == "ellipse":
-            return float(t["a"]), float(t["b"])
-        if kind == "circle":
-            return float(t["r"]), float(t["r"])
-        if kind == "stadium":
-            return 0.5 * float(t["length"]) + float(t["radius"]), float(t["radius"])
-        return self.arena, self.arena
+        """Semi-axes of the spawn ellipse E (inside the table, containing the inscribed disk: the
+        table's own spawn_axes), or the arena on the open plane."""
+        tab = self.make_table()
+        return tab.spawn_axes() if tab is not None else (self.arena, self.arena)
 
     def length_scale(self) -> float:
         """L: positions are observed as position / L (walls) or tanh(position / L) (open plane)."""

@@ -1,18 +1,20 @@
-"""Compiled batches (optional, numba): physics/scalar.py's own functions, compiled, run over the
-pennies of a batch in parallel.
+"""Compiled batches (numba): physics/scalar.py's own functions, compiled, run over the pennies of a
+batch in parallel.
 
 Nothing here restates the physics. :func:`compiled_functions` takes the functions of kernels.py,
-flow.py and scalar.py as they are and compiles copies of them with numba, in which the math
+flows.py and scalar.py as they are and compiles copies of them with numba, in which the math
 namespace ``SCALAR`` is physics/numba_math.py (the same ``math`` functions, for numba). The only
-new code is the loop over pennies (``_advance_batch``, ``_flow_batch``) and the unpacking of their
-impacts into arrays. A penny therefore takes the same operations as in the plain-Python loop
-(single environment) and in the numpy batch (physics.advance); tests/test_compiled.py checks that
-the three agree.
+new code is the loop over pennies (``_advance_batch``, ``_flow_batch``, ``_first_impact_batch``), the
+unpacking of their impacts into arrays, and the dispatch over the registered tables' formulas
+(:func:`dispatch_source`: ``wall_terms`` and ``wall_hess`` generated from tables.COMPILED_FORMULAS
+into a real file, so that numba's on-disk cache recognises it from one process to the next). A penny
+therefore takes the same operations as in the plain-Python loop (physics/pennies.py's
+``backend="python"``); tests/test_compiled.py checks that the two agree bitwise.
 
-numba is an optional dependency (``pip install "penny_env[fast]"``, included in ``[all]``); without
-it :func:`available` is False and the environments use the numpy batch. Only the built-in tables
-(Ellipse, Circle, Stadium) compile; other tables use the numpy batch. The first use in a fresh
-install compiles for some seconds and numba caches the machine code on disk (``cache=True``).
+Every registered table (Ellipse, Circle, Stadium, RoundedRectangle, and any table registered with
+formulas, see docs/extending.md) compiles; other tables (ConvexTable, protocol objects) run the
+plain-Python loop. The first use in a fresh install compiles for some seconds and numba caches the
+machine code on disk (``cache=True``).
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ import numpy as np
 # interval (accumulations) is rerun alone to collect them all
 IMPACT_CAPACITY = 8
 
-_COMPILED = None
+_COMPILED: dict = {}  # (tables' formulas, laws) registered -> compiled functions
 
 
 def available() -> bool:
@@ -37,30 +39,81 @@ def available() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
-def choose_backend(backend, params, table, law, settings, table_field="table") -> str:
-    """'numba' or 'numpy' for ``backend`` in 'auto', 'numba', 'numpy': 'auto' takes numba where it is
-    installed and the table compiles (the built-in tables and the open plane, table None); an
-    explicit 'numba' that cannot run raises ValueError naming the cause."""
-    from .scalar import OTHER, scalar_model
+_WARNED = set()
 
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
-    compiles = table is None or scalar_model(params, table, law, settings).kind != OTHER
+
+def compiles(table) -> bool:
+    """The table runs in the compiled loop: the open plane (None) or a registered table with formulas."""
+    from .tables import compiled_kind
+    return table is None or compiled_kind(type(table)) >= 0
+
+
+def choose_backend(backend, params, table, law, settings, table_field="table", python="numpy") -> str:
+    """'numba' or the plain-Python name ``python`` for ``backend`` in 'auto', 'numba', ``python``:
+    'auto' takes numba where it is installed and the table compiles (:func:`compiles`), and warns once
+    per table type naming the slower plain-Python path where it does not; an explicit 'numba' that
+    cannot run raises ValueError naming the cause."""
+    if backend not in ("auto", python, "numba"):
+        raise ValueError(f"backend must be 'auto', {python!r} or 'numba', got {backend!r}")
+    ok = compiles(table)
     if backend == "numba":
         if not available():
-            raise ValueError("backend='numba' needs numba: pip install \"penny_env[fast]\"")
-        if not compiles:
+            raise ValueError("backend='numba' needs numba: pip install numba")
+        if not ok:
             raise ValueError(f"backend='numba': {table_field} {type(table).__name__} does not compile "
-                             "(only ellipse, circle, stadium and the open plane do); use backend='numpy'")
+                             f"(registered tables with formulas and the open plane do); use backend={python!r}")
     if backend == "auto":
-        return "numba" if available() and compiles else "numpy"
+        if not ok and type(table) not in _WARNED:
+            import warnings
+            _WARNED.add(type(table))
+            warnings.warn(f"{table_field} {getattr(table, 'name', type(table).__name__)!s} ({type(table).__name__}) has no "
+                          "compiled formulas: it runs the plain-Python event loop, much slower (register its "
+                          "formulas to compile it, see docs/extending.md)", RuntimeWarning, stacklevel=3)
+        return "numba" if available() and ok else python
     return backend
 
 
 def _other_table(m, x, y):
     """Stands in for scalar.other_terms / other_hess, which call Python objects: compiled models
-    only ever have the built-in kinds (CompiledBatch refuses other tables)."""
+    only ever have registered kinds (CompiledBatch refuses other tables)."""
     return np.nan, np.nan, np.nan
+
+
+def dispatch_source(n_kinds: int, n_laws: int) -> str:
+    """Source of the compiled ``wall_terms`` / ``wall_hess``: a branch per registered table kind k,
+    calling ``terms_k`` / ``hess_k`` (the table's static formulas, compiled) with its constants; and
+    of ``law_terms``: a branch per registered law function j, calling ``law_j``."""
+    lines = ['"""Generated by penny_env.physics.compiled.dispatch_source: do not edit."""', ""]
+    for name, part in (("wall_terms", "terms"), ("wall_hess", "hess")):
+        lines += ["", f"def {name}(m, x, y):", "    c = (m.t0, m.t1, m.t2, m.t3, m.t4)"]
+        for k in range(n_kinds):
+            lines += [f"    if m.kind == {k}:", f"        return {part}_{k}(c, x, y)"]
+        lines += [f"    return other_{part}(m, x, y)", ""]
+    lines += ["", "def law_terms(m, W, w, a, b, grad2):"]
+    for j in range(n_laws - 1):
+        lines += [f"    if m.law == {j}:", f"        return law_{j}(W, w, a, b, grad2, m.e, m.Itot, m.J, m.m)"]
+    lines += [f"    return law_{n_laws - 1}(W, w, a, b, grad2, m.e, m.Itot, m.J, m.m)", ""]
+    return "\n".join(lines)
+
+
+def _dispatch_functions(folder: Path, n_kinds: int, n_laws: int) -> dict:
+    """wall_terms / wall_hess / law_terms of :func:`dispatch_source`, defined from a file in ``folder``
+    (written only when its text changes: numba's cache keys on the file's time stamp); in memory where
+    it cannot be written."""
+    source = dispatch_source(n_kinds, n_laws)
+    path = None if folder is None else folder / f"penny_env_dispatch_{n_kinds}_{n_laws}.py"
+    try:
+        if path is None:
+            raise OSError("no file: not cached")
+        if not path.exists() or path.read_text() != source:
+            folder.mkdir(exist_ok=True)
+            path.write_text(source)
+        filename = str(path)
+    except OSError:
+        filename = "<penny_env dispatch>"
+    scope: dict = {"__name__": __name__}  # numba's cache pickles the function's module by name
+    exec(compile(source, filename, "exec"), scope)
+    return {k: scope[k] for k in ("wall_terms", "wall_hess", "law_terms")}
 
 
 def drop_stale_cache(folder, modules) -> None:
@@ -85,9 +138,16 @@ def drop_stale_cache(folder, modules) -> None:
 
 
 def physics_modules() -> tuple:
-    """The modules whose functions compiled code copies (see :func:`compiled_functions`)."""
-    from . import kernels, numba_math, scalar
-    return (kernels, importlib.import_module(".flow", __package__), scalar, numba_math, importlib.import_module(__name__))
+    """The modules whose functions compiled code copies (see :func:`compiled_functions`): the
+    physics and every registered table's module (their formulas are compiled into the loop)."""
+    import sys
+
+    from . import flows, kernels, numba_math, scalar
+    from .laws import COMPILED_LAWS
+    from .tables import COMPILED_FORMULAS
+    tables = tuple(dict.fromkeys(sys.modules[f.__module__] for f in [g for pair in COMPILED_FORMULAS for g in pair] + COMPILED_LAWS
+                                 if f.__module__.startswith("penny_env.")))  # users' formulas are never cached
+    return (kernels, flows, scalar, numba_math, importlib.import_module(__name__)) + tables
 
 
 def jit_copy(f, namespace, jit):
@@ -102,42 +162,62 @@ def jit_copy(f, namespace, jit):
 
 
 def compiled_functions() -> dict:
-    """name -> compiled function, for kernels.py, flow.phase_sweep and scalar.py (compiled once)."""
-    global _COMPILED
-    if _COMPILED is not None:
-        return _COMPILED
+    """name -> compiled function, for kernels.py, flows.phase_sweep and scalar.py, with the dispatch
+    over the registered tables and laws (compiled once per registry state). With only penny_env's
+    own tables and laws the machine code is cached on disk; a user's registered formulas compile in
+    each process (cache=False: they would otherwise evict the built-in cache at every change)."""
     try:
         import numba
     except ImportError:
-        raise ImportError('the compiled backend needs numba: pip install "penny_env[fast]"') from None
-    from . import kernels, numba_math, scalar
-    flow = importlib.import_module(".flow", __package__)  # the module (the package exports the function flow)
-    drop_stale_cache(Path(__file__).with_name("__pycache__"), physics_modules())
+        raise ImportError('the compiled backend needs numba: pip install numba') from None
+    from . import flows, kernels, numba_math, scalar
+    from .laws import COMPILED_LAWS
+    from .tables import COMPILED_FORMULAS
+    key = (tuple(COMPILED_FORMULAS), tuple(COMPILED_LAWS))
+    if key in _COMPILED:
+        return _COMPILED[key]
+    own = all(f.__module__.startswith("penny_env.") for f in [g for pair in COMPILED_FORMULAS for g in pair] + COMPILED_LAWS)
+    cache = Path(__file__).with_name("__pycache__")
+    if own:
+        modules = physics_modules()
+        drop_stale_cache(cache, modules)
+        drop_stale_cache(cache / "__pycache__", modules)  # the generated dispatch's machine code
 
-    jit = numba.njit(cache=True)
+    jit = numba.njit(cache=own)
     namespace = {"__builtins__": builtins}
-    for module in (kernels, flow, scalar):
+    for module in (kernels, flows, scalar):
         namespace.update({k: v for k, v in vars(module).items() if not k.startswith("__")})
     namespace["SCALAR"] = namespace["ARRAY"] = numba_math
     # the quadrature rules as 2-D arrays: the same numbers, which compiled code indexes faster than
     # a tuple of tuples
     for name in ("RULE_NODES", "RULE_WEIGHTS"):
-        namespace[name] = np.array(getattr(flow, name))
+        namespace[name] = np.array(getattr(flows, name))
     sources = [f for module in (kernels, scalar) for f in vars(module).values()
                if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
-    sources.append(flow.phase_sweep)
+    sources.append(flows.phase_sweep)
     for f in sources:
         namespace[f.__name__] = jit_copy(f, namespace, jit)
     namespace["other_terms"] = namespace["other_hess"] = jit(_other_table)
+    # the tables' formulas and the dispatch over them (replacing scalar.wall_terms / wall_hess,
+    # which index a Python list)
+    def formula(f):  # penny_env's run in the physics namespace (numba_math); a user's in its own globals
+        return jit_copy(f, namespace, jit) if f.__module__.startswith("penny_env.") else jit(f)
+    for k, (terms, hess) in enumerate(COMPILED_FORMULAS):
+        namespace[f"terms_{k}"] = formula(terms)
+        namespace[f"hess_{k}"] = formula(hess)
+    for j, update in enumerate(COMPILED_LAWS):
+        namespace[f"law_{j}"] = formula(update)
+    for name, f in _dispatch_functions(cache if own else None, len(COMPILED_FORMULAS), len(COMPILED_LAWS)).items():
+        namespace[name] = jit_copy(f, namespace, jit)
     fns = {f.__name__: namespace[f.__name__] for f in sources}
     # the loops over pennies, compiled as copies too: module-level functions whose callees are
     # globals of the namespace (closures over dispatchers would miss numba's cache every process)
     namespace["prange"] = numba.prange
     namespace["_angle_trig"] = jit_copy(_angle_trig, namespace, jit)
-    parallel = numba.njit(parallel=True, cache=True)
-    for f in (_advance_batch, _flow_batch):
+    parallel = numba.njit(parallel=True, cache=own)
+    for f in (_advance_batch, _flow_batch, _first_impact_batch):
         fns[f.__name__] = jit_copy(f, namespace, parallel)
-    _COMPILED = fns
+    _COMPILED[key] = fns
     return fns
 
 
@@ -160,7 +240,7 @@ def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
         if certified_free1(s, a1, a2, dt, m):  # noqa: F821
             s1 = flow1(s, a1, a2, dt, m.R)  # noqa: F821
         else:
-            s1, impacts, rests, elapsed = advance_m(s, a1, a2, dt, m, 0)  # noqa: F821
+            s1, impacts, rests, elapsed = advance_resumed(s, a1, a2, dt, m)  # noqa: F821
             k = len(impacts)
             for j in range(min(k, cap)):
                 times[i, j] = impacts[j][0]
@@ -174,6 +254,12 @@ def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
         _angle_trig(s1, trig, i)
 
 
+def _first_impact_batch(S, acc1, acc2, horizon, m, rounds, t_out, end_out):
+    for i in prange(S.shape[1]):  # noqa: F821
+        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+        t_out[i], end_out[i] = first_impact_resumed(s, acc1[i], acc2[i], horizon[i], m, rounds)  # noqa: F821
+
+
 def _flow_batch(S, acc1, acc2, dt, R, out, trig):
     for i in prange(S.shape[1]):  # noqa: F821
         s1 = flow1((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), acc1[i], acc2[i], dt, R)  # noqa: F821
@@ -183,17 +269,18 @@ def _flow_batch(S, acc1, acc2, dt, R, out, trig):
 
 
 class CompiledBatch:
-    """advance() over one control interval for (6, N) batches, compiled (see the module docstring).
+    """The per-penny event loop over one control interval for (6, N) batches, compiled (see the
+    module docstring): :meth:`states_and_impacts`.
 
     ``CompiledBatch(params, table, law, settings)``; table None is the open plane. Raises ImportError
-    without numba and ValueError for a table that does not compile (not Ellipse/Circle/Stadium)."""
+    without numba and ValueError for a table that does not compile (see :func:`compiles`)."""
 
     def __init__(self, params, table, law, settings):
-        from .scalar import OTHER, scalar_model
+        from .scalar import scalar_model
 
+        if not compiles(table):
+            raise ValueError(f"table: only registered tables with compiled formulas compile, got {type(table).__name__}")
         self.model = scalar_model(params, table, law, settings)
-        if table is not None and self.model.kind == OTHER:
-            raise ValueError(f"table: only the built-in tables compile, got {type(table).__name__}")
         self._fns = compiled_functions()
         self.R = params.R
         self.plane = table is None
@@ -205,13 +292,23 @@ class CompiledBatch:
         S = np.zeros((6, 1))
         S[4] = 1.0
         zero = np.zeros(1)
-        self.advance(S, zero, zero, 1e-9)
+        self.states_and_impacts(S, zero, zero, 1e-9)
         if not self.plane:
-            self._fns["advance_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model, 0)
+            self._fns["advance_resumed"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model)
 
-    def advance(self, S, acc1, acc2, dt, trig_out=None):
-        """(new S (6, N), log): log None when no penny hit the wall, else (env, time, end, post (k, 6))
-        sorted by penny then time, as physics.advance's EventLog. trig_out: optional (4, N) array
+    def first_impacts(self, S, acc1, acc2, horizon, rounds=64):
+        """(t_hit (N,), end (N,) int8) of scalar.first_impact_resumed for each penny, in parallel."""
+        n = S.shape[1]
+        t = np.empty(n)
+        end = np.empty(n, dtype=np.int64)
+        self._fns["_first_impact_batch"](np.ascontiguousarray(S, dtype=np.float64), np.ascontiguousarray(acc1, dtype=np.float64),
+                                         np.ascontiguousarray(acc2, dtype=np.float64),
+                                         np.ascontiguousarray(horizon, dtype=np.float64), self.model, int(rounds), t, end)
+        return t, end.astype(np.int8)
+
+    def states_and_impacts(self, S, acc1, acc2, dt, trig_out=None):
+        """(new S (6, N), log) after one interval dt: log None when no penny hit the wall, else
+        (env, time, end, post (k, 6)) sorted by penny then time. trig_out: optional (4, N) array
         that receives cos theta, sin theta, cos phi, sin phi of the new states (math.cos/sin)."""
         S = np.ascontiguousarray(S, dtype=np.float64)
         acc1 = np.ascontiguousarray(acc1, dtype=np.float64)
@@ -244,9 +341,24 @@ class CompiledBatch:
         post[stored] = posts[env[stored], rank[stored]]
         for i in np.flatnonzero(counts > cap):  # more impacts than the buffer holds: rerun this penny alone
             s = tuple(float(v) for v in S[:, i])
-            _, impacts, _, _ = self._fns["advance_m"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model, 0)
+            impacts = self._fns["advance_resumed"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model)[1]
             rows = np.flatnonzero(env == i)
             t[rows] = [imp[0] for imp in impacts]
             e[rows] = [imp[1] for imp in impacts]
             post[rows] = [imp[2] for imp in impacts]
         return out, (env, t, e, post)
+
+
+def advance_collect(advance_m, s, acc1, acc2, dt, m, stop_after=0):
+    """advance_m resumed while it stops early (its per-call work cap) and stop_after is not reached:
+    (state, impacts, rests, elapsed) over the whole interval, times since its start."""
+    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, stop_after)
+    impacts, rests = list(impacts), list(rests)
+    while elapsed < dt and not (stop_after > 0 and len(impacts) >= stop_after):
+        s, more, more_rests, e = advance_m(s, acc1, acc2, dt - elapsed, m, stop_after - len(impacts) if stop_after > 0 else 0)
+        impacts += [(t + elapsed, end, post) for t, end, post in more]
+        rests += [(t + elapsed, pinned) for t, pinned in more_rests]
+        if e == 0.0 and not more:
+            break
+        elapsed += e
+    return s, impacts, rests, elapsed

@@ -56,7 +56,7 @@ _S0, _S1, _S2, _S3, _S4, _S5, _S6, _S7 = ((-1) ** j / math.factorial(2 * j + 1) 
 
 def cis_small(z, xp=ARRAY):
     """(cos z, sin z) for |z| <= SMALL_ANGLE by polynomials: a handful of multiply-adds where
-    libm's sin and cos cost tens of nanoseconds (the quadrature's inner loop, flow.py). Horner's
+    libm's sin and cos cost tens of nanoseconds (the quadrature's inner loop, flows.py). Horner's
     scheme written out: a loop would cost Python more than the arithmetic."""
     z2 = z * z
     c = ((((_C5 * z2 + _C4) * z2 + _C3) * z2 + _C2) * z2 + _C1) * z2 + _C0

@@ -19,6 +19,10 @@ Every law moves v along the metric gradient of n, v+ = v - k (a / (I + m R^2), b
   2 m R^2 cos^2(beta) / (I + m R^2) + m R^2 sin^2(beta) / J < 1 (beta: heading vs wall normal), so
   for I > m R^2 head-on or J > m R^2 sideways. The simulator then removes the normal velocity
   (the e = 0 law), the limit of re-applying the plastic map at the same instant. Energy never increases.
+
+Laws are an open registry: a law is one function ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)``
+of the normal form (plain math, so that numba compiles it into the event loop), registered by name
+with :func:`register_law` (see docs/extending.md); ``make_law(name)`` then finds it.
 """
 from __future__ import annotations
 
@@ -27,19 +31,65 @@ import math
 
 import numpy as np
 
-from .flow import PHI, THETA_DOT, PHI_DOT, end_kinematics
-from .kernels import law_update
+from .flows import PHI, THETA_DOT, PHI_DOT, end_kinematics
+from .kernels import SCALAR, law_update
+
+
+def restitution_update(W, w, a, b, grad2, e, Itot, J, m):
+    """Restitution e in [0, 1] (elastic: e = 1): n(v+) = -e n(v) along the metric gradient of n."""
+    return law_update(W, w, a, b, grad2, e, False, Itot, J, m, SCALAR)
+
+
+def plastic_update(W, w, a, b, grad2, e, Itot, J, m):
+    """The paper's plastic law pi_Delta o P (e ignored)."""
+    return law_update(W, w, a, b, grad2, e, True, Itot, J, m, SCALAR)
+
+
+LAW_KINDS: dict = {}      # name -> (update, default e)
+COMPILED_LAWS: list = []  # the distinct update functions; Model.law indexes it
+
+
+def register_law(name: str, update, e: float = 1.0) -> None:
+    """Make ``make_law(name)`` the law whose post-impact velocities are ``update(W, w, a, b, grad2, e,
+    Itot, J, m) -> (W+, w+)`` (W, w: theta_dot, phi_dot before; n = a W + b w the end's outward normal
+    velocity, grad2 = |grad h|^2; Itot = I + m R^2). ``update`` must be plain math (numba compiles it
+    into the event loop) and must not increase the kinetic energy; e is the coefficient it receives."""
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"register_law: name must be an identifier, got {name!r}")
+    if not callable(update):
+        raise TypeError("register_law: update must be a function")
+    LAW_KINDS[name] = (update, float(e))
+    if law_index(update) < 0:
+        COMPILED_LAWS.append(update)
+
+
+def law_index(update) -> int:
+    """Index of a law's update function in COMPILED_LAWS, or -1."""
+    for k, f in enumerate(COMPILED_LAWS):
+        if f is update:
+            return k
+    return -1
+
+
+register_law("elastic", restitution_update, 1.0)
+register_law("restitution", restitution_update, 1.0)
+register_law("plastic", plastic_update, 0.0)
 
 
 @dataclass(frozen=True)
 class ImpactLaw:
-    """An impact law: kind "elastic", "plastic" or "restitution" (coefficient e)."""
+    """An impact law: a registered kind ("elastic", "plastic", "restitution" with coefficient e, ...)."""
 
     kind: str
     e: float = 1.0
 
     def __str__(self) -> str:
         return self.kind if self.kind != "restitution" else f"restitution(e={self.e:g})"
+
+    @property
+    def update(self):
+        """The law's registered update function."""
+        return LAW_KINDS[self.kind][0]
 
 
 def make_law(law) -> ImpactLaw:
@@ -52,7 +102,10 @@ def make_law(law) -> ImpactLaw:
             return ImpactLaw("elastic", 1.0)
         if key == "plastic":
             return ImpactLaw("plastic", 0.0)
-        raise ValueError(f"law must be 'elastic', 'plastic' or a restitution coefficient in [0, 1], got {law!r}")
+        if key in LAW_KINDS and key != "restitution":
+            return ImpactLaw(key, LAW_KINDS[key][1])
+        raise ValueError(f"law must be one of {sorted(k for k in LAW_KINDS if k != 'restitution')} or a restitution "
+                         f"coefficient in [0, 1], got {law!r}")
     if isinstance(law, bool) or not isinstance(law, (int, float, np.integer, np.floating)):
         raise TypeError(f"law must be 'elastic', 'plastic' or a float in [0, 1], got {type(law).__name__}")
     e = float(law)
@@ -76,6 +129,12 @@ def apply_law(s, sigma, params, table, law: ImpactLaw):
     s = np.asarray(s, dtype=float)
     a, b, g2 = normal_form(s, sigma, params, table)
     out = s.copy()
+    if law.kind not in ("elastic", "restitution", "plastic"):  # a registered law: its scalar function
+        a, b, g2 = (np.broadcast_to(v, s.shape[1:]) for v in (a, b, g2))
+        for i in range(s.shape[1]):
+            out[THETA_DOT, i], out[PHI_DOT, i] = law.update(s[THETA_DOT, i], s[PHI_DOT, i], a[i], b[i], g2[i], law.e,
+                                                            params.rolling_inertia, params.J, params.m)
+        return out
     out[THETA_DOT], out[PHI_DOT] = law_update(s[THETA_DOT], s[PHI_DOT], a, b, g2, law.e, law.kind == "plastic",
                                               params.rolling_inertia, params.J, params.m)
     return out

@@ -1,13 +1,34 @@
-"""One penny in plain floats: the event loop of events.py / advance.py, step for step.
+"""The event loop of the penny, once: one penny in plain floats, numba-compatible.
 
-The single environment and simulate() advance one penny at a time, where numpy's per-call
-overhead would dominate. These functions run the same kernels (kernels.py) in the same order
-as the batched code, so a penny gives bitwise the same trajectory here and inside a batch
-(tests/test_scalar_batch.py checks this). States are 6-tuples (x, y, theta, phi, theta_dot, phi_dot).
+States are 6-tuples (x, y, theta, phi, theta_dot, phi_dot). Everything a penny needs travels in a
+:class:`Model` of plain numbers (the table's formula index and constants, the law's index and
+coefficient included), so physics/compiled.py compiles these very functions (and runs them in
+parallel over the pennies of a batch, physics/pennies.py); in plain Python they run as they are,
+the readable reference the tests compare the compiled loop with, bitwise.
 
-The code is also numba-compatible: everything a penny needs travels in a :class:`Model` of plain
-numbers (the table's kind and constants included), so physics/compiled.py compiles these very
-functions for the vector environment. In plain Python they run as they are.
+Impact search (:func:`first_impact_m`). For an end p(t), g(t) = h(p(t)) is the wall function along
+the flow. While the end is on the table, |p'| <= V and |p''| <= A (bounds from the linear-in-time
+angular velocities), so g'' <= M = L V^2 + G A (L, G: the table's Hessian and gradient bounds).
+From a time t the quadratic g(t) + g'(t) tau + M tau^2 / 2 bounds g from above, and it stays
+<= delta up to its positive root tau* (delta = contact_tol * table size, a few ulps of the table).
+Stepping by tau* therefore never passes over an impact deeper than delta, however grazing.
+Shallower "impacts" are below the round-off of the positions themselves. Near a transversal
+crossing the steps are Newton steps from below and converge quadratically; near a tangency they
+shrink geometrically, so the step count stays small and is capped by settings.max_search_steps
+(end 2: resumed by the caller from the certified time). An impact is declared where g >= -delta
+with g' > 0, then polished by one Newton step limited to sqrt(2 delta / M). Tables that offer a
+Hessian add a third-order certificate: g''(s) <= g''(t) + jump V^2 + K (s - t) with
+K >= |d^3 g / dt^3| (kernels.curvature_step); near a tangency that step crosses it at once; each
+step taken is the larger of the two certified ones.
+
+Degenerate cases end in a defined state (:func:`advance_m`; docs/physics.md):
+* an end on the wall still moving outward after the law (plastic with I > m R^2): the normal
+  velocity is removed (kernels.law_update);
+* accumulation (Zeno), including both ends wedged against the wall: zeno_impacts consecutive
+  impacts each within max(zeno_window, 8 sqrt(2 delta / M)) of the previous one, or
+  max_events_per_interval impacts in one interval, bring the penny to rest (theta_dot = phi_dot
+  = 0). If the controls then push an end that touches the wall outward, the penny stays pinned
+  until the interval ends.
 """
 from __future__ import annotations
 
@@ -16,14 +37,17 @@ import weakref
 from functools import lru_cache
 from typing import NamedTuple
 
-from .flow import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_COUNTS, RULE_LIMITS, RULE_NODES,
+from .flows import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_COUNTS, RULE_LIMITS, RULE_NODES,
                    RULE_WEIGHTS, phase_sweep)
+from .laws import COMPILED_LAWS, law_index
+from .tables.base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind
 from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step, displacement_closed,
                       end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
                       time_resolution)
 
 
-ELLIPSE, STADIUM, OTHER = 0, 1, 2  # Model.kind: the table's formulas
+OTHER = -1  # Model.kind of a table called through its methods (plain Python only); else an index
+# into tables.COMPILED_FORMULAS (the registered tables' compiled formulas)
 
 
 class Model(NamedTuple):
@@ -39,15 +63,15 @@ class Model(NamedTuple):
     D3: float            # third_derivative_bound
     jump: float          # hessian_jump
     delta: float         # contact tolerance [m]
-    e: float             # restitution coefficient
-    plastic: bool
+    e: float             # the law's coefficient (restitution e)
+    law: int             # index of the law's update function in laws.COMPILED_LAWS
     max_search_steps: int
     zeno_impacts: int
     zeno_window: float
     max_events: int
-    kind: int            # ELLIPSE (and Circle), STADIUM or OTHER (any table, through its methods)
+    kind: int            # index of the table's formulas in tables.COMPILED_FORMULAS, or OTHER
     other: int           # OTHER: the key of the table in _OTHER_TABLES
-    t0: float            # t0..t4: the built-in table's constants
+    t0: float            # t0..t4: the table's constants (Table.constants(), zero-padded)
     t1: float
     t2: float
     t3: float
@@ -55,31 +79,10 @@ class Model(NamedTuple):
 
 
 # -- the tables' formulas: wall_terms(m, x, y) -> (h, hx, hy), wall_hess(m, x, y) -> (hxx, hxy, hyy) ------
-# The built-in tables' are inlined (the same expressions as their methods, so the same values);
-# any other table is called through its methods (plain Python only, see physics/compiled.py).
+# A registered table's static terms/hess (one module per shape, physics/tables/) receive its constants;
+# any other table is called through its methods (plain Python only). Compiled, these two functions
+# are replaced by a dispatch over the registered kinds generated by physics/compiled.py.
 _OTHER_TABLES = weakref.WeakValueDictionary()
-
-
-def ellipse_terms(m, x, y):
-    ia2, ib2, hc = m.t0, m.t1, m.t2
-    c2 = 2.0 * hc
-    return (x * x * ia2 + y * y * ib2 - 1.0) * hc, c2 * x * ia2, c2 * y * ib2
-
-
-def ellipse_hess(m, x, y):
-    c2 = 2.0 * m.t2
-    return c2 * m.t0, 0.0, c2 * m.t1
-
-
-def stadium_terms(m, x, y):
-    half, r, r2, two_r = m.t0, m.t1, m.t2, m.t3
-    dx = x - min(max(x, -half), half)
-    return (dx * dx + y * y - r2) / two_r, dx / r, y / r
-
-
-def stadium_hess(m, x, y):
-    half, inv = m.t0, m.t4
-    return (inv if x - min(max(x, -half), half) != 0.0 else 0.0), 0.0, inv
 
 
 def other_terms(m, x, y):
@@ -93,31 +96,38 @@ def other_hess(m, x, y):
 
 
 def wall_terms(m, x, y):
-    if m.kind == ELLIPSE:
-        return ellipse_terms(m, x, y)
-    if m.kind == STADIUM:
-        return stadium_terms(m, x, y)
-    return other_terms(m, x, y)
+    if m.kind == OTHER:
+        return other_terms(m, x, y)
+    return COMPILED_FORMULAS[m.kind][0]((m.t0, m.t1, m.t2, m.t3, m.t4), x, y)
 
 
 def wall_hess(m, x, y):
-    if m.kind == ELLIPSE:
-        return ellipse_hess(m, x, y)
-    if m.kind == STADIUM:
-        return stadium_hess(m, x, y)
-    return other_hess(m, x, y)
+    if m.kind == OTHER:
+        return other_hess(m, x, y)
+    return COMPILED_FORMULAS[m.kind][1]((m.t0, m.t1, m.t2, m.t3, m.t4), x, y)
+
+
+def law_terms(m, W, w, a, b, grad2):
+    """The law's post-impact (theta_dot, phi_dot) for the normal form n = a W + b w (laws.py)."""
+    return COMPILED_LAWS[m.law](W, w, a, b, grad2, m.e, m.Itot, m.J, m.m)
+
+
+def third_order(table):
+    """(use it, third-derivative bound, Hessian jump) for tables that offer a Hessian."""
+    if getattr(table, "hessian", None) is None:
+        return False, 0.0, 0.0
+    return True, float(getattr(table, "third_derivative_bound", 0.0)), float(getattr(table, "hessian_jump", 0.0))
 
 
 def table_constants(table):
-    """(kind, constants t0..t4) of a table."""
-    from .tables import Circle, Ellipse, Stadium
-
-    if type(table) in (Ellipse, Circle):
-        return ELLIPSE, (table._ia2, table._ib2, table._half_c, 0.0, 0.0)
-    if type(table) is Stadium:
-        r = table.radius
-        return STADIUM, (table._half, r, r ** 2, 2.0 * r, 1.0 / r)
-    return OTHER, (0.0,) * 5
+    """(kind, constants t0..t4) of a table: OTHER for a table without registered compiled formulas."""
+    kind = compiled_kind(type(table))
+    if kind == OTHER:
+        return OTHER, (0.0,) * N_CONSTANTS
+    c = tuple(float(v) for v in table.constants())
+    if len(c) > N_CONSTANTS:
+        raise ValueError(f"table {type(table).__name__}: constants() gives {len(c)} numbers, at most {N_CONSTANTS}")
+    return kind, c + (0.0,) * (N_CONSTANTS - len(c))
 
 
 def scalar_model(params, table, law, settings) -> Model:
@@ -129,10 +139,8 @@ def scalar_model(params, table, law, settings) -> Model:
 
 
 def _build_model(params, table, law, settings):
-    from .events import third_order
-
     if table is None:
-        kind, consts, G, L, third, D3, jump, delta = OTHER, (0.0,) * 5, 0.0, 0.0, False, 0.0, 0.0, 0.0
+        kind, consts, G, L, third, D3, jump, delta = OTHER, (0.0,) * N_CONSTANTS, 0.0, 0.0, False, 0.0, 0.0, 0.0
         other = 0
     else:
         kind, consts = table_constants(table)
@@ -143,7 +151,7 @@ def _build_model(params, table, law, settings):
         third, D3, jump = third_order(table)
         G, L, delta = float(table.grad_bound), float(table.hessian_bound), settings.contact_tol * table.size
     return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta,
-                 float(law.e), law.kind == "plastic", int(settings.max_search_steps), int(settings.zeno_impacts),
+                 float(law.e), law_index(law.update), int(settings.max_search_steps), int(settings.zeno_impacts),
                  float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
 
@@ -206,7 +214,7 @@ def wall1(s, sigma, m):
 
 
 def end_plain1(x, y, c, sn, W, w, sigma, m, M):
-    """(g, g', plain certified step, end position, gradient) of one end (see events.end_step);
+    """(g, g', plain certified step, end position, gradient) of one end;
     c, sn = cos, sin of the heading."""
     R = m.R
     sR = sigma * R
@@ -217,7 +225,8 @@ def end_plain1(x, y, c, sn, W, w, sigma, m, M):
 
 
 def with_curvature1(end, c, sn, W, w, sigma, acc1, acc2, m, M, K, V2, rem):
-    """The end's step, improved by the curvature step where that can help (see events.end_step)."""
+    """The end's step, improved by the curvature step where that can help: moving away, or near a
+    tangency (curvature dominates the approach speed)."""
     g, gd, step, px, py, hx, hy = end
     if step < rem and (gd <= 0.0 or gd * gd < 2.0 * M * abs(g)):
         hxx, hxy, hyy = wall_hess(m, px, py)
@@ -260,7 +269,8 @@ def certified_free_trig(s, c, sn, acc1, acc2, dt, m):
 
 
 def first_impact_m(s0, acc1, acc2, horizon, m):
-    """(t_hit, end) as events.first_impact: end 0 = none (t_hit inf), 2 = step budget spent."""
+    """(t_hit, end) of the first impact within horizon (module docstring): end +1 front, -1 back,
+    0 none (t_hit inf), 2 step budget spent (t_hit: the time certified free so far)."""
     R = m.R
     delta = m.delta
     W_end = s0[4] + acc2 * horizon
@@ -288,7 +298,7 @@ def first_impact_m(s0, acc1, acc2, horizon, m):
             return min(max(t + newton_polish(g, gd, M, delta, SCALAR), 0.0), horizon), (1 if front else -1)
         if m.third:
             # tau = min over ends of max(plain, curvature step): the other end's curvature step only
-            # matters when the first end's step exceeds the other's plain step (same tau as events.py)
+            # matters when the first end's step exceeds the other's plain step (the same tau as taking both ends' best steps)
             rem = horizon - t
             if step_f <= step_b:
                 s1 = with_curvature1(ef, c, sn, W, w, 1.0, acc1, acc2, m, M, K, V2, rem)
@@ -305,6 +315,22 @@ def first_impact_m(s0, acc1, acc2, horizon, m):
         if not t < horizon:
             return math.inf, 0
     return t, 2
+
+
+def first_impact_resumed(s0, acc1, acc2, horizon, m, rounds):
+    """(t_hit, end) as first_impact_m, resumed from the certified time (at most ``rounds`` times) when
+    the search spends its step budget: end +1 front, -1 back, 0 none (t_hit inf, also when the budget
+    of every round is spent)."""
+    start = 0.0
+    t, end = first_impact_m(s0, acc1, acc2, horizon, m)
+    for _ in range(rounds):
+        if end != 2:
+            break
+        start += t
+        t, end = first_impact_m(flow1(s0, acc1, acc2, start, m.R), acc1, acc2, horizon - start, m)
+    if end == 0 or end == 2:
+        return math.inf, 0
+    return start + t, end
 
 
 # -- impacts -------------------------------------------------------------------------------------
@@ -329,7 +355,7 @@ def law1(s, sigma, m):
     c, sn = math.cos(s[3]), math.sin(s[3])
     a = R * (hx * c + hy * sn)
     b = sigma * R * (hy * c - hx * sn)
-    W, w = law_update(s[4], s[5], a, b, hx * hx + hy * hy, m.e, m.plastic, m.Itot, m.J, m.m, SCALAR)
+    W, w = law_terms(m, s[4], s[5], a, b, hx * hx + hy * hy)
     return (s[0], s[1], s[2], s[3], W, w)
 
 
@@ -348,7 +374,7 @@ def pushes_out1(s, acc1, acc2, m, delta):
 
 
 def advance_m(s, acc1, acc2, dt, m, stop_after):
-    """One penny over one control interval with walls (see advance.advance); stop_after <= 0: no limit.
+    """One penny over one control interval with walls (module docstring); stop_after <= 0: no limit.
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
     rests a list of (time, pinned)."""
@@ -400,9 +426,25 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
             return s, impacts, rests, elapsed
 
 
+def advance_resumed(s, acc1, acc2, dt, m):
+    """advance_m over the whole interval: resumed while it stops early (its per-call work cap), the
+    impacts' times since the interval's start. Returns (state, impacts, rests, elapsed)."""
+    s1, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, 0)
+    while elapsed < dt:
+        s1, more, more_rests, e = advance_m(s1, acc1, acc2, dt - elapsed, m, 0)
+        for imp in more:
+            impacts.append((imp[0] + elapsed, imp[1], imp[2]))
+        for r in more_rests:
+            rests.append((r[0] + elapsed, r[1]))
+        if e == 0.0 and len(more) == 0:
+            break
+        elapsed += e
+    return s1, impacts, rests, elapsed
+
+
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------
 def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
-    """One penny over one control interval (see advance.advance).
+    """One penny over one control interval, from the physics objects (builds the Model).
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
     rests a list of (time, pinned)."""

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .flow import end_kinematics
+from .flows import end_kinematics
 from .params import PennyParams
 from .tables import as_table
 

@@ -25,6 +25,9 @@ counted).  The earliest impact over both ends wins.
 Tables: Ellipse(a, b): h = x^2/a^2 + y^2/b^2 - 1 (circle: a = b).
 Stadium(r, L): h = dist(p, [-L/2, L/2] x {0}) - r, grad h = unit vector
 from the nearest segment point to p.
+RoundedRect(W, H, r): h = dist(p, [-W/2+r, W/2-r] x [-H/2+r, H/2-r]) - r (four
+corner circles and four straight sides, each a quadric piece for the polynomial
+impact search).
 
 Impact laws (configuration unchanged, only velocities jump)
 -----------------------------------------------------------
@@ -219,6 +222,53 @@ class Stadium:
 
     def max_extent(self):
         return self.hl + self.r
+
+
+class RoundedRect:
+    """|x| < W/2, |y| < H/2 with corners rounded to quarter circles of radius r:
+    h = dist(p, inner rectangle [-ax, ax] x [-ay, ay]) - r, ax = W/2 - r, ay = H/2 - r."""
+
+    def __init__(self, W, H, r):
+        self.W, self.H, self.r = mpf(W), mpf(H), mpf(r)
+        self.ax, self.ay = self.W / 2 - self.r, self.H / 2 - self.r
+
+    def _offset(self, x, y):
+        return x - min(max(x, -self.ax), self.ax), y - min(max(y, -self.ay), self.ay)
+
+    def h(self, x, y):
+        dx, dy = self._offset(x, y)
+        return mpmath.sqrt(dx ** 2 + dy ** 2) - self.r
+
+    def grad(self, x, y):
+        dx, dy = self._offset(x, y)
+        d = mpmath.sqrt(dx ** 2 + dy ** 2)
+        if d == 0:  # inside the inner rectangle, far from the wall: only h is used there
+            return (mpf(0), mpf(0))
+        return (dx / d, dy / d)
+
+    def pieces(self):
+        ax, ay, r, tol = self.ax, self.ay, self.r, mpf("1e-30")
+        out = []
+        for sx in (1, -1):
+            for sy in (1, -1):  # corner circles centred (sx ax, sy ay)
+                out.append((mpf(1), mpf(1), -2 * sx * ax, -2 * sy * ay, ax * ax + ay * ay - r * r,
+                            lambda x, y, sx=sx, sy=sy: sx * x >= ax - tol and sy * y >= ay - tol))
+        for sx in (1, -1):  # sides x = +-(ax + r)
+            out.append((mpf(0), mpf(0), mpf(sx), mpf(0), -(ax + r), lambda x, y: abs(y) <= ay + tol))
+        for sy in (1, -1):  # sides y = +-(ay + r)
+            out.append((mpf(0), mpf(0), mpf(0), mpf(sy), -(ay + r), lambda x, y: abs(x) <= ax + tol))
+        return out
+
+    def json(self):
+        return {"type": "rounded_rectangle", "width": S(self.W), "height": S(self.H), "radius": S(self.r)}
+
+    def max_extent(self):
+        return max(self.W, self.H) / 2
+
+    def piece_name(self, x, y):
+        if abs(x) > self.ax and abs(y) > self.ay:
+            return ("top" if y > 0 else "bottom") + "_" + ("right" if x > 0 else "left") + "_corner"
+        return ("right_side" if x > 0 else "left_side") if abs(x) > self.ax else ("top_side" if y > 0 else "bottom_side")
 
 
 def form_val(pc, X, Y):
@@ -1084,6 +1134,54 @@ def build_B(do_checks, log):
 
 
 # ---------------------------------------------------------------------------
+# E. rounded rectangle scenes
+# ---------------------------------------------------------------------------
+
+def _rounded_rectangle():
+    return RoundedRect(mpf("0.3"), mpf("0.2"), mpf("0.04"))
+
+
+def build_E(do_checks, log):
+    out = []
+    P = default_params()
+    for name, law, e, st0, n_imp in (
+            ("rounded_rectangle_elastic", "elastic", None,
+             (mpf("0.01"), mpf("0.02"), mpf(0), mpf("0.5"), mpf("9.0"), mpf("1.1")), 20),
+            ("rounded_rectangle_plastic", "plastic", None,
+             (mpf("-0.02"), mpf("0.01"), mpf(0), mpf("2.3"), mpf("12.0"), mpf("-0.8")), 15),
+            ("rounded_rectangle_restitution_0.5", "restitution", mpf("0.5"),
+             (mpf("0.03"), mpf("-0.01"), mpf(0), mpf("0.9"), mpf("15.0"), mpf("0.4")), 15)):
+        t0 = time.time()
+        table = _rounded_rectangle()
+        res = run_uncontrolled(st0, table, P, law, e, n_imp, mpf(3), checks={})
+        d = scene_json(name, P, table, law, e, st0, res, n_imp, mpf(3), "state_at_3")
+        dg = scene_diag(res, P, law)
+        if do_checks:
+            r2 = run_uncontrolled(st0, table, P, law, e, n_imp, mpf(3), method="sample", checks={})
+            dt, ds, same = compare_runs(res, r2)
+            assert same and dt < mpf("1e-32"), dt
+            dg["crosscheck_sampler_max_abs_diff_times"] = fnum(dt)
+            dg["crosscheck_sampler_max_abs_diff_states"] = fnum(ds)
+            with mp.workdps(70):
+                r3 = run_uncontrolled(st0, _rounded_rectangle(), default_params(), law, e, n_imp, mpf(3),
+                                      checks={"inside_check": False})
+            dt, ds, same = compare_runs(res, r3)
+            assert same and dt < mpf("1e-32"), dt
+            dg["precision_check_vs_70_digits_max_abs_diff_times"] = fnum(dt)
+            dg["precision_check_vs_70_digits_max_abs_diff_states"] = fnum(ds)
+        d["impact_wall_pieces"] = [table.piece_name(*end_pos(s, sg, P)) for s, sg in zip(res["states"], res["ends"])]
+        d["diagnostics"] = dg
+        out.append(d)
+        log(f"  E {name}: {len(res['times'])} impacts, {time.time() - t0:.1f}s")
+    return {
+        "description": "Rounded rectangle 0.3 x 0.2 m, corner radius 0.04 m: elastic, plastic and "
+                       "restitution 0.5 scenes (impacts on the sides and on the corners).",
+        "state_order": ["x", "y", "theta", "phi", "theta_dot", "phi_dot"],
+        "scenes": out,
+    }
+
+
+# ---------------------------------------------------------------------------
 # C. flow cases
 # ---------------------------------------------------------------------------
 
@@ -1315,7 +1413,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[1])
     ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
     ap.add_argument("--skip-checks", action="store_true", help="skip the (slower) cross-checks")
-    ap.add_argument("--only", default="ABCD")
+    ap.add_argument("--only", default="ABCDE")
     args = ap.parse_args()
     mp.dps = DPS
     os.makedirs(args.out, exist_ok=True)
@@ -1328,7 +1426,8 @@ def main():
     meta = {"generator": "tests/reference/make_reference.py", "mpmath_version": mpmath.__version__,
             "working_digits": DPS, "stored_significant_digits": NDIG, "cross_checks_run": do_checks}
     for key, fname, fn in (("A", "paper_scenes.json", build_A), ("B", "extra_scenes.json", build_B),
-                           ("C", "flow_cases.json", build_C), ("D", "impact_map_cases.json", build_D)):
+                           ("C", "flow_cases.json", build_C), ("D", "impact_map_cases.json", build_D),
+                           ("E", "rounded_rectangle_scenes.json", build_E)):
         if key not in args.only:
             continue
         t0 = time.time()

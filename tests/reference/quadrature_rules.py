@@ -1,4 +1,4 @@
-"""Truncation error of the n-node Gauss-Legendre rules used by physics/flow.py, by mpmath at 40 digits.
+"""Truncation error of the n-node Gauss-Legendre rules used by physics/flows.py, by mpmath at 40 digits.
 
 For each rule size n and phase sweep (as flow.phase_sweep measures it: max(|w|, |w + a|) + |a| / 2
 on [0, 1]) the worst relative error of the rule on int_0^1 (c0 + c1 u) exp(i (w u + a u^2 / 2)) du,

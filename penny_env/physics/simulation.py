@@ -6,9 +6,8 @@ import math
 
 import numpy as np
 
-from .advance import relocate_inside
-from .scalar import advance1, flow1
-from .flow import flow, end_kinematics, kinetic_energy
+from .scalar import advance1, flow1, relocate1, scalar_model
+from .flows import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_table,
@@ -102,9 +101,9 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         raise ValueError("give t_final or n_impacts (or controls)")
     S = s[:, None]
     check_inside(S, params, table)
-    if table is not None:
-        S = relocate_inside(S, params, table)
     state = tuple(float(v) for v in S[:, 0])
+    if table is not None:
+        state = relocate1(state, scalar_model(params, table, law, settings))
 
     times, ends, states, rests = [], [], [], []
     seg_t, seg_s, seg_acc = [0.0], [state], []

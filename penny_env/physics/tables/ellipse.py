@@ -1,0 +1,87 @@
+"""The elliptic table (the paper's) and the circle."""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Table, length, register_table
+
+
+def ellipse_terms(c, x, y):
+    """(h, hx, hy); c = (1/a^2, 1/b^2, min(a, b)/2)."""
+    ia2, ib2, hc = c[0], c[1], c[2]
+    c2 = 2.0 * hc
+    return (x * x * ia2 + y * y * ib2 - 1.0) * hc, c2 * x * ia2, c2 * y * ib2
+
+
+def ellipse_hess(c, x, y):
+    c2 = 2.0 * c[2]
+    return c2 * c[0], 0.0, c2 * c[1]
+
+
+class Ellipse(Table):
+    """Elliptic table x^2/a^2 + y^2/b^2 < 1 (semi-axes a along x, b along y), the paper's table.
+
+    h = (x^2/a^2 + y^2/b^2 - 1) * min(a, b) / 2, the paper's h scaled to metres."""
+
+    name = "ellipse"
+    terms = staticmethod(ellipse_terms)
+    hess = staticmethod(ellipse_hess)
+    third_derivative_bound = 0.0
+    hessian_jump = 0.0
+
+    def __init__(self, a: float, b: float):
+        self.a = length(type(self).__name__, "a", a)
+        self.b = length(type(self).__name__, "b", b)
+        c = min(self.a, self.b)
+        self._half_c = 0.5 * c
+        self._ia2 = 1.0 / self.a**2
+        self._ib2 = 1.0 / self.b**2
+        self.grad_bound = 1.0
+        self.hessian_bound = 1.0 / c
+        self.inradius = c
+        self.extent = (-self.a, self.a, -self.b, self.b)
+
+    def _fields(self):
+        return {"a": self.a, "b": self.b}
+
+    def constants(self):
+        return (self._ia2, self._ib2, self._half_c)
+
+    def h(self, x, y):
+        return (x * x * self._ia2 + y * y * self._ib2 - 1.0) * self._half_c
+
+    def grad(self, x, y):
+        c2 = 2.0 * self._half_c
+        return c2 * x * self._ia2, c2 * y * self._ib2
+
+    def hessian(self, x, y):
+        c2 = 2.0 * self._half_c
+        return c2 * self._ia2 + 0.0 * x, 0.0 * x, c2 * self._ib2 + 0.0 * y
+
+    def spawn_axes(self):
+        return self.a, self.b
+
+    def wall_distance(self, c, s):
+        return 1.0 / np.sqrt(c * c * self._ia2 + s * s * self._ib2)
+
+    def boundary(self, n: int = 256) -> np.ndarray:
+        t = np.linspace(0.0, 2.0 * np.pi, n)
+        return np.stack([self.a * np.cos(t), self.b * np.sin(t)], axis=1)
+
+
+class Circle(Ellipse):
+    """Circular table x^2 + y^2 < r^2 (the paper's circle, a = b = r)."""
+
+    name = "circle"
+
+    def __init__(self, r: float):
+        r = length("Circle", "r", r)
+        super().__init__(r, r)
+        self.r = r
+
+    def _fields(self):
+        return {"r": self.r}
+
+
+register_table("ellipse", Ellipse)
+register_table("circle", Circle)
