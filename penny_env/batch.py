@@ -22,11 +22,13 @@ from .physics import SolverSettings, advance, make_law, make_table  # noqa: F401
 from .physics import apply_law, end_kinematics
 from .physics import first_impact as _first_impact
 from .physics import flow as _flow
-from .physics.validation import as_states, check_inside, check_params, check_table, positive_time
+from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
+                                 positive_time, real_array)
 
 __all__ = ["flow", "first_impact", "impact_map", "simulate", "BatchResult"]
 
 _UNCONTROLLED_CHUNK = 0.1  # [s] interval length when simulating without controls (bounds the work per call)
+MAX_INTERVALS = 1_000_000  # intervals one simulate() call runs (bounded work): t_final <= 1e5 s without controls
 
 
 def _table(table, params):
@@ -39,10 +41,7 @@ def _table(table, params):
 
 def _controls(controls, n, params, name="controls"):
     """(acc1, acc2) arrays of length n from (2,) or (N, 2) torques."""
-    try:
-        u = np.array(controls, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be (u1, u2) torques, shape (2,) or (N, 2)") from None
+    u = real_array(controls, name, "(u1, u2) torques, shape (2,) or (N, 2)")
     if u.shape == (2,):
         u = np.broadcast_to(u, (n, 2))
     if u.shape != (n, 2):
@@ -54,10 +53,7 @@ def _controls(controls, n, params, name="controls"):
 
 
 def _times(t, n, name):
-    try:
-        arr = np.array(t, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number or an (N,) array") from None
+    arr = real_array(t, name, "a number or an (N,) array")
     arr = np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr
     if arr.shape != (n,):
         raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
@@ -89,7 +85,7 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     check_inside(S, params, tab, "states")
     acc1, acc2 = _controls(controls, n, params)
     h = _times(horizon, n, "horizon")
-    settings = settings or SolverSettings()
+    settings = check_settings(settings)
     acc1, acc2 = np.ascontiguousarray(acc1), np.ascontiguousarray(acc2)
     t_hit, end = _first_impact(S, acc1, acc2, h, params, tab, settings)
     # a search that spent its step budget (end 2) resumes from the time it certified, a bounded number of times
@@ -174,8 +170,7 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     params = check_params(params)
     tab = _table(table, params)
     law = make_law(law)
-    settings = settings or SolverSettings()
-    step = _stepper(params, tab, law, settings, backend)
+    settings = check_settings(settings)
     S = as_states(states)
     n = S.shape[1]
     if tab is not None:
@@ -184,17 +179,17 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     if controls is None:
         if control_dt is not None:
             raise ValueError("control_dt is given but controls is None")
-        k_steps = int(np.ceil(t_final / _UNCONTROLLED_CHUNK))
-        dts = [_UNCONTROLLED_CHUNK] * (k_steps - 1) + [t_final - _UNCONTROLLED_CHUNK * (k_steps - 1)]
-        acc = [(np.zeros(n), np.zeros(n))] * k_steps
+        dt_grid, k_steps = _UNCONTROLLED_CHUNK, int(np.ceil(t_final / _UNCONTROLLED_CHUNK))
+        if k_steps > MAX_INTERVALS:
+            raise ValueError(f"t_final={t_final!r} needs {k_steps} intervals of {_UNCONTROLLED_CHUNK} s, beyond the "
+                             f"limit MAX_INTERVALS = {MAX_INTERVALS} per call (bounded work); split the run")
+        zero = np.zeros(n)
+        accel = lambda k: (zero, zero)  # noqa: E731
     else:
         if control_dt is None:
             raise ValueError("control_dt is required when controls are given")
-        control_dt = positive_time(control_dt, "control_dt")
-        try:
-            u = np.array(controls, dtype=float)
-        except (TypeError, ValueError):
-            raise TypeError("controls must be a (K, 2) or (K, N, 2) array of torques") from None
+        dt_grid = control_dt = positive_time(control_dt, "control_dt")
+        u = real_array(controls, "controls", "a (K, 2) or (K, N, 2) array of torques")
         if u.ndim == 2 and u.shape[1] == 2:
             u = np.broadcast_to(u[:, None, :], (u.shape[0], n, 2))
         if u.ndim != 3 or u.shape[1:] != (n, 2) or u.shape[0] == 0:
@@ -206,17 +201,27 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
         k_steps = int(np.ceil(t_final / control_dt - 1e-12))
         if k_steps > u.shape[0]:
             raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * control_dt} (K * control_dt)")
-        dts = [control_dt] * (k_steps - 1) + [t_final - control_dt * (k_steps - 1)]
-        acc = [(u[k, :, 0] / params.J, u[k, :, 1] / params.rolling_inertia) for k in range(k_steps)]
+        accel = lambda k: (u[k, :, 0] / params.J, u[k, :, 1] / params.rolling_inertia)  # noqa: E731
+    step = _stepper(params, tab, law, settings, backend)
     envs, times, ends, posts = [], [], [], []
     t0 = 0.0
-    for (acc1, acc2), dt in zip(acc, dts):
+    recorded = 0
+    for k in range(k_steps):
+        dt = dt_grid if k < k_steps - 1 else t_final - dt_grid * (k_steps - 1)
+        acc1, acc2 = accel(k)
+        check_speed_bound(S, acc1, acc2, dt, params, "controls" if controls is not None else "states",
+                          k if controls is not None else None)
         S, log = step(S, acc1, acc2, dt)
         if log is not None:
             envs.append(log[0])
             times.append(t0 + log[1])
             ends.append(log[2])
             posts.append(log[3])
+            recorded += log[0].size
+            if recorded > settings.max_impacts:
+                raise ValueError(f"t_final={t_final!r}: the batch passed SolverSettings.max_impacts = "
+                                 f"{settings.max_impacts} impacts at t = {t0 + dt:.6g} s (bounded memory); ask for "
+                                 "less or raise SolverSettings.max_impacts")
         t0 += dt
     if envs:
         env = np.concatenate(envs)

@@ -160,7 +160,7 @@ def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
         if certified_free1(s, a1, a2, dt, m):  # noqa: F821
             s1 = flow1(s, a1, a2, dt, m.R)  # noqa: F821
         else:
-            s1, impacts, rests, elapsed = advance_m(s, a1, a2, dt, m, 0)  # noqa: F821
+            s1, impacts, rests, _ = advance_through_m(s, a1, a2, dt, m)  # noqa: F821
             k = len(impacts)
             for j in range(min(k, cap)):
                 times[i, j] = impacts[j][0]
@@ -207,7 +207,7 @@ class CompiledBatch:
         zero = np.zeros(1)
         self.advance(S, zero, zero, 1e-9)
         if not self.plane:
-            self._fns["advance_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model, 0)
+            self._fns["advance_through_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model)
 
     def advance(self, S, acc1, acc2, dt, trig_out=None):
         """(new S (6, N), log): log None when no penny hit the wall, else (env, time, end, post (k, 6))
@@ -244,7 +244,7 @@ class CompiledBatch:
         post[stored] = posts[env[stored], rank[stored]]
         for i in np.flatnonzero(counts > cap):  # more impacts than the buffer holds: rerun this penny alone
             s = tuple(float(v) for v in S[:, i])
-            _, impacts, _, _ = self._fns["advance_m"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model, 0)
+            _, impacts, _, _ = self._fns["advance_through_m"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model)
             rows = np.flatnonzero(env == i)
             t[rows] = [imp[0] for imp in impacts]
             e[rows] = [imp[1] for imp in impacts]

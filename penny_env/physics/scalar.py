@@ -348,10 +348,18 @@ def pushes_out1(s, acc1, acc2, m, delta):
 
 
 def advance_m(s, acc1, acc2, dt, m, stop_after):
-    """One penny over one control interval with walls (see advance.advance); stop_after <= 0: no limit.
+    """One penny over one control interval (see advance.advance); stop_after <= 0: no limit.
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
-    rests a list of (time, pinned)."""
+    rests a list of (time, pinned). The call stops early, right after an impact, with elapsed < dt
+    and the state reached (speeds untouched), after stop_after impacts or after m.max_events impacts
+    (SolverSettings.max_events_per_interval: it bounds the work and the impact list of one call,
+    never the physics); the caller resumes from there (:func:`advance_through_m`).
+
+    Only an accumulation brings a penny to rest: m.zeno_impacts consecutive impacts each closer
+    than the time-resolution window to the previous one, under a dissipative law. An elastic
+    penny is never stopped (it keeps its energy; tables too narrow for the search to resolve its
+    impacts are refused up front, validation.check_table)."""
     R = m.R
     impacts = [(0.0, 0, s)]  # typed by example (numba); removed below
     rests = [(0.0, False)]
@@ -363,6 +371,7 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
     n_events = 0
     streak = 0
     delta = m.delta
+    elastic = m.e == 1.0 and not m.plastic
     while True:
         rem = dt - elapsed
         t_hit, end = first_impact_m(s, acc1, acc2, rem, m)
@@ -384,7 +393,7 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
         window = max(m.zeno_window, 8.0 * time_resolution(delta, M, SCALAR))
         streak = streak + 1 if t_hit < window else 0
         done = False
-        if streak >= m.zeno_impacts or n_events >= m.max_events:
+        if streak >= m.zeno_impacts and not elastic:
             post = (post[0], post[1], post[2], post[3], 0.0, 0.0)
             streak = 0
             pinned = pushes_out1(post, acc1, acc2, m, 64 * delta)
@@ -393,11 +402,30 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
                 done = True
                 elapsed = dt
         impacts.append((t_impact, end, post))
-        if stop_after > 0 and n_events >= stop_after:
+        if (stop_after > 0 and n_events >= stop_after) or n_events >= m.max_events:
             done = True
         s = post
         if done:
             return s, impacts, rests, elapsed
+
+
+def advance_through_m(s, acc1, acc2, dt, m):
+    """:func:`advance_m` over the whole interval: resumes after each call that the per-call event cap
+    stopped early. Returns (state, impacts, rests, dt) with the times counted from the interval's start."""
+    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, 0)
+    while elapsed < dt:
+        rem = dt - elapsed
+        s, more, more_rests, step = advance_m(s, acc1, acc2, rem, m, 0)
+        for k in range(len(more)):
+            t_k, end_k, post_k = more[k]
+            impacts.append((elapsed + t_k, end_k, post_k))
+        for k in range(len(more_rests)):
+            t_k, pinned_k = more_rests[k]
+            rests.append((elapsed + t_k, pinned_k))
+        if not step < rem:  # reached the interval's end
+            break
+        elapsed += step
+    return s, impacts, rests, dt
 
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------

@@ -11,8 +11,8 @@ from .scalar import advance1, flow1
 from .flow import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
-from .validation import (as_state, check_controls, check_inside, check_params, check_table,
-                         positive_count, positive_time)
+from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
+                         check_table, positive_count, positive_time)
 
 
 @dataclass
@@ -21,9 +21,11 @@ class Trajectory:
 
     impact_times (k,), impact_ends (k,) (+1 front, -1 back), impact_states (k, 6) (the state
     right after each impact), final_state (6,), final_time. rest_times: times at which an
-    accumulation of impacts (Zeno) brought the penny to rest. complete: False when n_impacts
-    were asked for but the penny provably never hits the wall again (uncontrolled periodic
-    motion away from the wall, or at rest). states_at(times) evaluates the trajectory exactly.
+    accumulation of impacts (Zeno) brought the penny to rest. complete: True when the run reached
+    what it was asked for (t_final, or n_impacts impacts, whichever came first); False only when
+    n_impacts were asked for without t_final and the penny provably never hits the wall again
+    (uncontrolled periodic motion clear of the wall, or at rest): final_time is then the time at
+    which that was proven. states_at(times) evaluates the trajectory exactly.
     """
 
     impact_times: np.ndarray
@@ -83,7 +85,7 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     params = check_params(params)
     table = check_table(table, params)
     law = make_law(law)
-    settings = DEFAULT_SETTINGS if settings is None else settings
+    settings = check_settings(settings)
     s = as_state(state)
     u, cdt = check_controls(controls, control_dt)
     if t_final is not None:
@@ -120,13 +122,19 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             chunk = _free_chunk(state, params, table)
             if t_final is not None:
                 chunk = min(chunk, t_final - t)
-            elif chunk == math.inf:  # at rest, no impact ever
-                complete = False
-                break
         seg_acc.append((acc1, acc2))
+        if chunk == math.inf:  # at rest without controls: no impact ever (only n_impacts was asked for)
+            complete = False
+            break
+        check_speed_bound(state, acc1, acc2, chunk, params, "controls" if u is not None else "state", k)
         left = None if n_impacts is None else n_impacts - len(times)
         state, impacts, rest_events, elapsed = advance1(state, acc1, acc2, chunk, params, table, law, settings,
                                                         stop_after=left)
+        if len(times) + len(impacts) > settings.max_impacts:
+            asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
+            raise ValueError(f"{asked}: the run passed SolverSettings.max_impacts = {settings.max_impacts} impacts at "
+                             f"t = {t + elapsed:.6g} s (bounded memory); ask for fewer, continue from a shorter run's "
+                             f"final_state, or raise SolverSettings.max_impacts")
         for ti, end, post in impacts:
             times.append(t + ti)
             ends.append(end)
@@ -147,15 +155,17 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             break
         if u is None and not impacts:
             # a whole free chunk without an impact: none ever again (_free_chunk)
-            complete = False
-            if t_final is not None:
+            if t_final is None:
+                complete = False  # n_impacts cannot be reached
+            else:
                 state = flow1(state, 0.0, 0.0, t_final - t, params.R)
                 t = t_final
             break
         if u is not None and t >= cdt * (k + 1) * (1 - 1e-15):
             k += 1
-            seg_t.append(t)
-            seg_s.append(state)
+        # the next chunk starts a new segment (dense output flows from its start state)
+        seg_t.append(t)
+        seg_s.append(state)
     S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
     return Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
