@@ -22,13 +22,13 @@ from .physics import SolverSettings, advance, make_law, make_table  # noqa: F401
 from .physics import apply_law, end_kinematics
 from .physics import first_impact as _first_impact
 from .physics import flow as _flow
+from .physics.simulate import FREE_INTERVAL, MAX_INTERVALS, interval_grid
 from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
                                  positive_time, real_array)
 
 __all__ = ["flow", "first_impact", "impact_map", "simulate", "BatchResult"]
 
-_UNCONTROLLED_CHUNK = 0.1  # [s] interval length when simulating without controls (bounds the work per call)
-MAX_INTERVALS = 1_000_000  # intervals one simulate() call runs (bounded work): t_final <= 1e5 s without controls
+_UNCONTROLLED_CHUNK = FREE_INTERVAL  # [s] interval length without controls, simulate()'s (bounds the work per call)
 
 
 def _table(table, params):
@@ -179,7 +179,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     if controls is None:
         if control_dt is not None:
             raise ValueError("control_dt is given but controls is None")
-        dt_grid, k_steps = _UNCONTROLLED_CHUNK, int(np.ceil(t_final / _UNCONTROLLED_CHUNK))
+        dt_grid = _UNCONTROLLED_CHUNK
+        k_steps, last_dt = interval_grid(t_final, dt_grid)
         if k_steps > MAX_INTERVALS:
             raise ValueError(f"t_final={t_final!r} needs {k_steps} intervals of {_UNCONTROLLED_CHUNK} s, beyond the "
                              f"limit MAX_INTERVALS = {MAX_INTERVALS} per call (bounded work); split the run")
@@ -198,7 +199,7 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
         if bad.any():
             k, i, _ = np.argwhere(bad)[0]
             raise ValueError(f"controls[{k}] for penny {i} is not finite")
-        k_steps = int(np.ceil(t_final / control_dt - 1e-12))
+        k_steps, last_dt = interval_grid(t_final, control_dt)
         if k_steps > u.shape[0]:
             raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * control_dt} (K * control_dt)")
         accel = lambda k: (u[k, :, 0] / params.J, u[k, :, 1] / params.rolling_inertia)  # noqa: E731
@@ -207,7 +208,7 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     t0 = 0.0
     recorded = 0
     for k in range(k_steps):
-        dt = dt_grid if k < k_steps - 1 else t_final - dt_grid * (k_steps - 1)
+        dt = dt_grid if k < k_steps - 1 else last_dt
         acc1, acc2 = accel(k)
         check_speed_bound(S, acc1, acc2, dt, params, "controls" if controls is not None else "states",
                           k if controls is not None else None)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .advance import relocate_inside
-from .scalar import advance1, flow1
+from .scalar import advance_m, certified_flow1, flow1, scalar_model
 from .flow import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
@@ -60,6 +60,18 @@ class Trajectory:
         return kinetic_energy(self.impact_states.T, self.params)
 
 
+FREE_INTERVAL = 0.1  # [s] intervals of an uncontrolled run to t_final (penny_env.batch.simulate uses the same)
+MAX_INTERVALS = 1_000_000  # intervals of FREE_INTERVAL in one batch.simulate call (bounded work): t_final <= 1e5 s
+
+
+def interval_grid(t_final, dt):
+    """(number of intervals, length of the last one) for intervals of length dt up to t_final; the
+    last one ends exactly at t_final. simulate() and penny_env.batch.simulate share this grid, so
+    a penny takes the same intervals (hence bitwise the same steps) in both."""
+    k_steps = max(1, int(math.ceil(t_final / dt - 1e-12)))
+    return k_steps, t_final - dt * (k_steps - 1)
+
+
 def _free_chunk(state, params, table):
     """Uncontrolled motion is periodic (period 2 pi / |phi_dot|) or a straight line that leaves
     any table within (table width) / speed: a chunk of this length with no impact means the
@@ -94,6 +106,9 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         n_impacts = positive_count(n_impacts, "n_impacts")
         if table is None:
             raise ValueError("n_impacts needs a table: the open plane has no impacts")
+        if n_impacts > settings.max_impacts:
+            raise ValueError(f"n_impacts={n_impacts} is beyond the limit SolverSettings.max_impacts = "
+                             f"{settings.max_impacts} (bounded memory); raise it or split the run")
     if u is not None:
         horizon = u.shape[0] * cdt
         if t_final is None:
@@ -108,64 +123,99 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         S = relocate_inside(S, params, table)
     state = tuple(float(v) for v in S[:, 0])
 
+    # the intervals: the control intervals; without controls, batch.simulate's grid of FREE_INTERVAL
+    # for runs to t_final alone that it would accept (so that both give bitwise the same), else one
+    # free period each (see _free_chunk), which lets a run with rare impacts take few intervals
+    grid = cdt
+    if u is None and n_impacts is None and interval_grid(t_final, FREE_INTERVAL)[0] <= MAX_INTERVALS:
+        grid = FREE_INTERVAL
+    if grid is not None:
+        k_steps, last_dt = interval_grid(t_final, grid)
+        if u is not None and k_steps > u.shape[0]:
+            raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * cdt} (len(controls) * control_dt)")
+    model = None if table is None else scalar_model(params, table, law, settings)
     times, ends, states, rests = [], [], [], []
-    seg_t, seg_s, seg_acc = [0.0], [state], []
-    t = 0.0
+    # dense output: segments (start time, start state, accelerations), one per impact and per control
+    # interval (free motion needs none at interval boundaries: the flow from the last start is exact)
+    seg_t, seg_s, seg_acc = [0.0], [state], [(0.0, 0.0)]
+    t0 = 0.0          # start of the current interval
     complete = True
     k = 0
     while True:
+        acc1 = acc2 = 0.0
         if u is not None:
             acc1, acc2 = float(u[k, 0]) / params.J, float(u[k, 1]) / params.rolling_inertia
-            chunk = min(cdt * (k + 1), t_final) - t
-        else:
-            acc1 = acc2 = 0.0
-            chunk = _free_chunk(state, params, table)
+        if grid is not None:
+            dt = grid if k < k_steps - 1 else last_dt
+        else:  # one free period per interval (see _free_chunk)
+            dt = _free_chunk(state, params, table)
             if t_final is not None:
-                chunk = min(chunk, t_final - t)
-        seg_acc.append((acc1, acc2))
-        if chunk == math.inf:  # at rest without controls: no impact ever (only n_impacts was asked for)
+                dt = min(dt, t_final - t0)
+        seg_acc[-1] = (acc1, acc2)
+        if dt == math.inf:  # at rest without controls and without t_final: no impact ever
             complete = False
+            t = t0
             break
-        check_speed_bound(state, acc1, acc2, chunk, params, "controls" if u is not None else "state", k)
-        left = None if n_impacts is None else n_impacts - len(times)
-        state, impacts, rest_events, elapsed = advance1(state, acc1, acc2, chunk, params, table, law, settings,
-                                                        stop_after=left)
-        if len(times) + len(impacts) > settings.max_impacts:
-            asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
-            raise ValueError(f"{asked}: the run passed SolverSettings.max_impacts = {settings.max_impacts} impacts at "
-                             f"t = {t + elapsed:.6g} s (bounded memory); ask for fewer, continue from a shorter run's "
-                             f"final_state, or raise SolverSettings.max_impacts")
-        for ti, end, post in impacts:
-            times.append(t + ti)
-            ends.append(end)
-            states.append(post)
-            seg_t.append(t + ti)
-            seg_s.append(post)
-            seg_acc.append((acc1, acc2))
-        for tr, pinned in rest_events:
-            rests.append(t + tr)
-            if pinned:  # held against the wall until the interval ends
-                seg_acc[-1] = (0.0, 0.0)
-        t += elapsed
+        check_speed_bound(state, acc1, acc2, dt, params, "controls" if u is not None else "state",
+                          k if u is not None else None)
+        # the interval, resumed wherever the per-call event cap stopped it (as scalar.advance_through_m)
+        off = 0.0
+        hit = False
+        while True:
+            left = None if n_impacts is None else n_impacts - len(times)
+            rem = dt - off
+            free, s1 = (True, flow1(state, acc1, acc2, rem, params.R)) if model is None else \
+                certified_flow1(state, acc1, acc2, rem, model)
+            if free:  # the search's first step certifies the interval free of impacts: what advance_m returns
+                state, impacts, rest_events, elapsed = s1, (), (), rem
+            else:
+                state, impacts, rest_events, elapsed = advance_m(state, acc1, acc2, rem, model,
+                                                                 0 if left is None else left)
+            if len(times) + len(impacts) > settings.max_impacts:
+                asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
+                raise ValueError(f"{asked}: the run passed SolverSettings.max_impacts = {settings.max_impacts} "
+                                 f"impacts at t = {t0 + off + elapsed:.6g} s (bounded memory); ask for fewer, continue "
+                                 "from a shorter run's final_state, or raise SolverSettings.max_impacts")
+            for ti, end, post in impacts:
+                times.append(t0 + (off + ti))
+                ends.append(end)
+                states.append(post)
+                seg_t.append(times[-1])
+                seg_s.append(post)
+                seg_acc.append((acc1, acc2))
+            for tr, pinned in rest_events:
+                rests.append(t0 + (off + tr))
+                if pinned:  # held against the wall until the interval ends
+                    seg_acc[-1] = (0.0, 0.0)
+            hit = hit or bool(impacts)
+            if n_impacts is not None and len(times) >= n_impacts:
+                break
+            if not elapsed < rem:
+                break
+            off += elapsed
         if n_impacts is not None and len(times) >= n_impacts:
             t = times[-1]
             break
-        if t_final is not None and t >= t_final * (1 - 1e-15):
+        t0 += dt
+        if (grid is not None and k >= k_steps - 1) or (grid is None and t_final is not None and t0 >= t_final * (1 - 1e-15)):
             t = t_final
             break
-        if u is None and not impacts:
-            # a whole free chunk without an impact: none ever again (_free_chunk)
+        k += 1
+        if u is None and not hit and (grid is None or (state[4] == 0.0 and state[5] == 0.0)):
+            # no impact ever again: a free period without one (_free_chunk), or at rest. (On the grid, a
+            # penny on an orbit tangent to the wall can still graze it after round-off, so the grid
+            # runs on, as batch.simulate does.)
             if t_final is None:
                 complete = False  # n_impacts cannot be reached
-            else:
-                state = flow1(state, 0.0, 0.0, t_final - t, params.R)
+                t = t0
+            else:  # one flow to t_final (batch.simulate would take the remaining FREE_INTERVAL steps)
+                state = flow1(state, 0.0, 0.0, t_final - t0, params.R)
                 t = t_final
             break
-        if u is not None and t >= cdt * (k + 1) * (1 - 1e-15):
-            k += 1
-        # the next chunk starts a new segment (dense output flows from its start state)
-        seg_t.append(t)
-        seg_s.append(state)
+        if u is not None:  # the next control interval starts a new segment
+            seg_t.append(t0)
+            seg_s.append(state)
+            seg_acc.append((0.0, 0.0))  # set at the top of the loop
     S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
     return Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),

@@ -96,24 +96,26 @@ def check_speeds(rows: np.ndarray, name: str) -> None:
                          f"MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s (docs/physics.md, Limits)")
 
 
-def speed_bound(W, w, acc1, acc2, dt, params: PennyParams):
-    """Upper bounds on |theta_dot| and |phi_dot| over an interval of length dt under constant
-    accelerations, impacts included: impacts never increase the kinetic energy, and the torques
-    change sqrt(2 E) = |v|_M (kinetic metric diag(I + m R^2, J)) at most at the rate
-    |acc|_M = sqrt((I + m R^2) acc2^2 + J acc1^2). Works on floats or arrays."""
-    It, J = params.rolling_inertia, params.J
-    v = np.sqrt(It * W * W + J * w * w) + dt * np.sqrt(It * acc2 * acc2 + J * acc1 * acc1)
-    return v / math.sqrt(It), v / math.sqrt(J)
-
-
 def check_speed_bound(state, acc1, acc2, dt, params: PennyParams, name: str, k=None) -> None:
-    """Refuse (ValueError naming name and the limit) an interval on which the penny could spin
-    beyond MAX_ANGULAR_SPEED, or, under a steering torque (the flow's quadrature, whose work grows
-    with the phase swept), sweep more than MAX_STEERED_PHASE radians. state: one 6-tuple, or a
-    (6, N) array with (N,) accelerations (dt a float)."""
-    W_max, w_max = speed_bound(np.asarray(state[4]), np.asarray(state[5]), np.asarray(acc1), np.asarray(acc2), dt, params)
-    too_fast = (W_max > MAX_ANGULAR_SPEED) | (w_max > MAX_ANGULAR_SPEED)
-    steered = (np.asarray(acc1) != 0.0) & (w_max * dt > MAX_STEERED_PHASE)
+    """Refuse (ValueError naming name and the limit) a controlled interval that would take the penny
+    beyond MAX_ANGULAR_SPEED (|theta_dot| + |acc2| dt or |phi_dot| + |acc1| dt from the interval's
+    start state), or whose steering torque would sweep more than MAX_STEERED_PHASE radians of
+    heading (the work of the flow's quadrature grows with it). Free intervals (no torque) are not
+    limited: their flow is in closed form and impacts never add energy. state: a 6-tuple with float
+    accelerations, or a (6, N) array with (N,) accelerations (dt a float)."""
+    if isinstance(state, tuple):  # one penny, plain floats (simulate's loop: no numpy overhead)
+        if acc1 == 0.0 and acc2 == 0.0:
+            return
+        w_end = abs(state[5]) + abs(acc1) * dt
+        if (abs(state[4]) + abs(acc2) * dt <= MAX_ANGULAR_SPEED and w_end <= MAX_ANGULAR_SPEED
+                and (acc1 == 0.0 or w_end * dt <= MAX_STEERED_PHASE)):
+            return
+    acc1, acc2 = np.asarray(acc1, dtype=float), np.asarray(acc2, dtype=float)
+    W_end = np.abs(np.asarray(state[4])) + np.abs(acc2) * dt
+    w_end = np.abs(np.asarray(state[5])) + np.abs(acc1) * dt
+    controlled = (acc1 != 0.0) | (acc2 != 0.0)
+    too_fast = controlled & ((W_end > MAX_ANGULAR_SPEED) | (w_end > MAX_ANGULAR_SPEED))
+    steered = (acc1 != 0.0) & (w_end * dt > MAX_STEERED_PHASE)
     bad = np.atleast_1d(too_fast | steered)
     if not bad.any():
         return
@@ -121,11 +123,11 @@ def check_speed_bound(state, acc1, acc2, dt, params: PennyParams, name: str, k=N
     where = name if k is None else f"{name}[{k}]"
     if bad.size > 1:
         where += f" (penny {i})"
-    Wm, wm = float(np.atleast_1d(W_max)[i]), float(np.atleast_1d(w_max)[i])
+    Wm, wm = float(np.atleast_1d(W_end)[i]), float(np.atleast_1d(w_end)[i])
     if np.atleast_1d(too_fast)[i]:
-        raise ValueError(f"{where}: over this interval ({dt:.6g} s) the penny could reach |theta_dot| = {Wm:.3g} or "
-                         f"|phi_dot| = {wm:.3g} rad/s, beyond the limit MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s "
-                         "(bounded work per call; docs/physics.md, Limits)")
+        raise ValueError(f"{where}: over this interval ({dt:.6g} s) the torques would take the penny to |theta_dot| = "
+                         f"{Wm:.3g} or |phi_dot| = {wm:.3g} rad/s, beyond the limit MAX_ANGULAR_SPEED = "
+                         f"{MAX_ANGULAR_SPEED:g} rad/s (bounded work per call; docs/physics.md, Limits)")
     raise ValueError(f"{where}: under a steering torque the heading could sweep {wm * dt:.3g} rad in one interval "
                      f"({dt:.6g} s), beyond the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad (bounded work per "
                      "call; use shorter control intervals; docs/physics.md, Limits)")
