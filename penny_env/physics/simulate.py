@@ -196,6 +196,10 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         if n_impacts is not None and len(times) >= n_impacts:
             t = times[-1]
             break
+        if grid is None and t_final is None and state[4] == 0.0 and state[5] == 0.0:
+            complete = False  # brought to rest (rest_times): n_impacts cannot be reached
+            t = times[-1]
+            break
         t0 += dt
         if (grid is not None and k >= k_steps - 1) or (grid is None and t_final is not None and t0 >= t_final * (1 - 1e-15)):
             t = t_final

@@ -14,7 +14,8 @@ import numbers
 import numpy as np
 
 from .flow import end_kinematics
-from .params import DEFAULT_SETTINGS, MAX_ANGULAR_SPEED, MAX_STEERED_PHASE, MIN_GAP, PennyParams, SolverSettings
+from .params import (DEFAULT_SETTINGS, MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MAX_STEERED_PHASE, MIN_GAP,
+                     PennyParams, SolverSettings)
 from .tables import as_table
 
 STATE_FIELDS = ("x", "y", "theta", "phi", "theta_dot", "phi_dot")
@@ -131,6 +132,23 @@ def check_speed_bound(state, acc1, acc2, dt, params: PennyParams, name: str, k=N
     raise ValueError(f"{where}: under a steering torque the heading could sweep {wm * dt:.3g} rad in one interval "
                      f"({dt:.6g} s), beyond the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad (bounded work per "
                      "call; use shorter control intervals; docs/physics.md, Limits)")
+
+
+def check_actuation(params: PennyParams, u1_max: float, u2_max: float, control_dt: float) -> None:
+    """An environment's actuation within the documented limits (bounded work per step): control_dt
+    <= MAX_CONTROL_DT, and one step at the torque limits adds at most MAX_ANGULAR_SPEED to
+    |phi_dot| or |theta_dot| and sweeps at most MAX_STEERED_PHASE of heading. ValueError naming the
+    field and the limit."""
+    if control_dt > MAX_CONTROL_DT:
+        raise ValueError(f"control_dt = {control_dt!r} s is beyond the limit MAX_CONTROL_DT = {MAX_CONTROL_DT:g} s")
+    for name, gain in (("u1", u1_max * control_dt / params.J), ("u2", u2_max * control_dt / params.rolling_inertia)):
+        if gain > MAX_ANGULAR_SPEED:
+            raise ValueError(f"torque_limits.{name} = {u1_max if name == 'u1' else u2_max!r} N m adds {gain:.3g} rad/s in "
+                             f"one control_dt, beyond the limit MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s")
+    sweep = u1_max * control_dt ** 2 / params.J
+    if sweep > MAX_STEERED_PHASE:
+        raise ValueError(f"torque_limits.u1 = {u1_max!r} N m sweeps {sweep:.3g} rad of heading in one control_dt, beyond "
+                         f"the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad")
 
 
 def check_settings(settings) -> SolverSettings:
