@@ -111,7 +111,8 @@ def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray
     law = make_law(law)
     S = as_states(states)
     n = S.shape[1]
-    e = np.array(ends).reshape(-1) if np.ndim(ends) else np.full(n, ends)
+    e = real_array(ends, "ends", "+-1 or an (N,) array of +-1")
+    e = e.reshape(-1) if e.ndim else np.full(n, e)
     if e.shape != (n,):
         raise ValueError(f"ends must be +-1 or have shape ({n},), got {np.shape(ends)}")
     badend = ~np.isin(e, (1, -1))

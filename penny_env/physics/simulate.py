@@ -12,7 +12,7 @@ from .flow import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
-                         check_table, positive_count, positive_time)
+                         check_table, is_real, positive_count, positive_time)
 
 
 @dataclass
@@ -240,7 +240,9 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     table = check_table(table, params)
     law = make_law(law)
     s = as_state(state)
-    if isinstance(end, bool) or end not in (1, -1):
+    if not is_real(end):
+        raise TypeError(f"end must be +1 (front) or -1 (back), got {type(end).__name__}")
+    if end not in (1, -1):
         raise ValueError(f"end must be +1 (front) or -1 (back), got {end!r}")
     S = s[:, None]
     px, py, _, _ = end_kinematics(S, float(end), params.R)
