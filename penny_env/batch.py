@@ -23,6 +23,8 @@ from .physics import apply_law, end_kinematics
 from .physics import first_impact as _first_impact
 from .physics import flow as _flow
 from .physics.simulate import FREE_INTERVAL, MAX_INTERVALS, interval_grid
+
+BATCH_IMPACTS_PER_LIMIT = 10  # a batch records its impacts in arrays (about 70 B each): 10 x SolverSettings.max_impacts
 from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
                                  positive_time, real_array)
 
@@ -220,10 +222,10 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
             ends.append(log[2])
             posts.append(log[3])
             recorded += log[0].size
-            if recorded > settings.max_impacts:
-                raise ValueError(f"t_final={t_final!r}: the batch passed SolverSettings.max_impacts = "
-                                 f"{settings.max_impacts} impacts at t = {t0 + dt:.6g} s (bounded memory); ask for "
-                                 "less or raise SolverSettings.max_impacts")
+            if recorded > BATCH_IMPACTS_PER_LIMIT * settings.max_impacts:
+                raise ValueError(f"t_final={t_final!r}: the batch recorded more than {BATCH_IMPACTS_PER_LIMIT} x "
+                                 f"SolverSettings.max_impacts = {BATCH_IMPACTS_PER_LIMIT * settings.max_impacts} impacts "
+                                 f"by t = {t0 + dt:.6g} s (bounded memory); ask for less or raise SolverSettings.max_impacts")
         t0 += dt
     if envs:
         env = np.concatenate(envs)

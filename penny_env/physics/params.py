@@ -75,7 +75,7 @@ class SolverSettings:
     zeno_window: float = 1e-9
     max_search_steps: int = 400
     max_events_per_interval: int = 10_000
-    max_impacts: int = 200_000
+    max_impacts: int = 100_000
 
     def __post_init__(self) -> None:
         _check_positive_finite("SolverSettings", contact_tol=self.contact_tol, zeno_window=self.zeno_window)
