@@ -13,7 +13,7 @@ import numpy as np
 
 # Documented limits on the inputs (docs/physics.md, Limits): they bound the work of one call.
 MAX_ANGULAR_SPEED = 1e5   # [rad/s] |theta_dot|, |phi_dot| a state may have or the controls may reach
-MAX_STEERED_PHASE = 1e4   # [rad] heading swept in one interval under a steering torque (quadrature work)
+MAX_STEERED_PHASE = 2e4   # [rad] heading swept in one interval under a steering torque (quadrature work)
 MAX_CONTROL_DT = 10.0     # [s] an environment's control period (each step's work)
 MIN_GAP = 1e-6            # tables need inradius >= R (1 + MIN_GAP): the search resolves the two ends' impacts
 
