@@ -1,6 +1,5 @@
 """Simulator trust (issue 12): caps bound work, never the physics; bounded work and memory per call;
 honest Trajectory fields; simulate and batch.simulate bitwise equal on the same intervals."""
-import math
 import time
 
 import numpy as np

@@ -10,7 +10,7 @@ from .advance import relocate_inside
 from .scalar import advance_m, certified_flow1, flow1, scalar_model
 from .flow import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
-from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
+from .params import PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
                          check_table, is_real, positive_count, positive_time)
 
@@ -93,6 +93,9 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     Stops at t_final, or right after the n_impacts-th impact, whichever comes first (at least
     one must be given; with controls, t_final defaults to len(controls) * control_dt).
     controls: (K, 2) rows of torques (u1, u2), row k held on [k, k+1) * control_dt.
+    settings: SolverSettings. Work and memory are bounded: inputs beyond the documented limits
+    (speeds, steering phase per interval, SolverSettings.max_impacts; docs/physics.md, Limits)
+    raise a ValueError naming the field and the limit.
     """
     params = check_params(params)
     table = check_table(table, params)
