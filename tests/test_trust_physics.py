@@ -243,3 +243,16 @@ def test_simulate_and_batch_are_bitwise_equal(backend, table, law):
         assert np.array_equal(tr.impact_times, res.impact_times)
         assert np.array_equal(tr.impact_states, res.impact_states)
         assert np.array_equal(tr.final_state, res.final_states[0])
+
+
+def test_advance1_runs_the_whole_interval_unless_told_to_stop():
+    """Callers that take advance1's state as the interval's end (analysis.baselines) get the whole
+    interval: advance1 resumes past the event cap unless stop_after is given."""
+    from penny_env.physics.scalar import advance1
+    s0 = (0.0, 0.0, 0.0, 0.3, 10.0, 0.2)
+    settings = pe.SolverSettings(max_events_per_interval=2)
+    table = pe.Circle(0.15)
+    s, impacts, _, elapsed = advance1(s0, 0.0, 0.0, 10.0, PARAMS, table, ELASTIC, settings)
+    assert elapsed == 10.0 and len(impacts) > 2
+    s, impacts, _, elapsed = advance1(s0, 0.0, 0.0, 10.0, PARAMS, table, ELASTIC, settings, stop_after=5)
+    assert elapsed < 10.0 and len(impacts) == 2  # the cap comes first; the caller resumes

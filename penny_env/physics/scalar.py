@@ -433,8 +433,12 @@ def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
     """One penny over one control interval (see advance.advance).
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
-    rests a list of (time, pinned)."""
+    rests a list of (time, pinned). Without stop_after the whole interval is run (elapsed = dt,
+    resumed past the per-call event cap, :func:`advance_through_m`); with it the call stops right
+    after stop_after impacts or at the cap (elapsed < dt), and the caller resumes."""
     if table is None:
         return flow1(s, acc1, acc2, dt, params.R), [], [], dt
     model = scalar_model(params, table, law, settings)
-    return advance_m(tuple(s), acc1, acc2, dt, model, 0 if stop_after is None else int(stop_after))
+    if stop_after is None:
+        return advance_through_m(tuple(s), acc1, acc2, dt, model)
+    return advance_m(tuple(s), acc1, acc2, dt, model, int(stop_after))
