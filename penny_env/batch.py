@@ -21,11 +21,15 @@ import numpy as np
 from .physics import SolverSettings, make_law, make_table  # noqa: F401 (make_table re-exported)
 from .physics import advance_pennies, apply_law, end_kinematics, first_impacts
 from .physics import flow as _flow
-from .physics.validation import as_states, check_inside, check_params, check_table, positive_time
+from .physics.simulation import FREE_INTERVAL, MAX_INTERVALS, interval_grid
+from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
+                                 positive_time, real_array)
+
+BATCH_IMPACTS_PER_LIMIT = 10  # a batch records its impacts in arrays (about 70 B each): 10 x SolverSettings.max_impacts
 
 __all__ = ["flow", "first_impact", "impact_map", "simulate", "BatchResult"]
 
-_UNCONTROLLED_CHUNK = 0.1  # [s] interval length when simulating without controls (bounds the work per call)
+_UNCONTROLLED_CHUNK = FREE_INTERVAL  # [s] interval length without controls, simulate()'s (bounds the work per call)
 
 
 def _table(table, params):
@@ -38,10 +42,7 @@ def _table(table, params):
 
 def _controls(controls, n, params, name="controls"):
     """(acc1, acc2) arrays of length n from (2,) or (N, 2) torques."""
-    try:
-        u = np.array(controls, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be (u1, u2) torques, shape (2,) or (N, 2)") from None
+    u = real_array(controls, name, "(u1, u2) torques, shape (2,) or (N, 2)")
     if u.shape == (2,):
         u = np.broadcast_to(u, (n, 2))
     if u.shape != (n, 2):
@@ -53,10 +54,7 @@ def _controls(controls, n, params, name="controls"):
 
 
 def _times(t, n, name):
-    try:
-        arr = np.array(t, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number or an (N,) array") from None
+    arr = real_array(t, name, "a number or an (N,) array")
     arr = np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr
     if arr.shape != (n,):
         raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
@@ -89,7 +87,7 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     check_inside(S, params, tab, "states")
     acc1, acc2 = _controls(controls, n, params)
     h = _times(horizon, n, "horizon")
-    settings = settings or SolverSettings()
+    settings = check_settings(settings)
     return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=_backend(backend))
 
 
@@ -102,7 +100,8 @@ def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray
     law = make_law(law)
     S = as_states(states)
     n = S.shape[1]
-    e = np.array(ends).reshape(-1) if np.ndim(ends) else np.full(n, ends)
+    e = real_array(ends, "ends", "+-1 or an (N,) array of +-1")
+    e = e.reshape(-1) if e.ndim else np.full(n, e)
     if e.shape != (n,):
         raise ValueError(f"ends must be +-1 or have shape ({n},), got {np.shape(ends)}")
     badend = ~np.isin(e, (1, -1))
@@ -168,8 +167,7 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     params = check_params(params)
     tab = _table(table, params)
     law = make_law(law)
-    settings = settings or SolverSettings()
-    step = _stepper(params, tab, law, settings, backend)
+    settings = check_settings(settings)
     S = as_states(states)
     n = S.shape[1]
     if tab is not None:
@@ -178,17 +176,18 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     if controls is None:
         if control_dt is not None:
             raise ValueError("control_dt is given but controls is None")
-        k_steps = int(np.ceil(t_final / _UNCONTROLLED_CHUNK))
-        dts = [_UNCONTROLLED_CHUNK] * (k_steps - 1) + [t_final - _UNCONTROLLED_CHUNK * (k_steps - 1)]
-        acc = [(np.zeros(n), np.zeros(n))] * k_steps
+        dt_grid = _UNCONTROLLED_CHUNK
+        k_steps, last_dt = interval_grid(t_final, dt_grid)
+        if k_steps > MAX_INTERVALS:
+            raise ValueError(f"t_final={t_final!r} needs {k_steps} intervals of {_UNCONTROLLED_CHUNK} s, beyond the "
+                             f"limit MAX_INTERVALS = {MAX_INTERVALS} per call (bounded work); split the run")
+        zero = np.zeros(n)
+        accel = lambda k: (zero, zero)  # noqa: E731
     else:
         if control_dt is None:
             raise ValueError("control_dt is required when controls are given")
-        control_dt = positive_time(control_dt, "control_dt")
-        try:
-            u = np.array(controls, dtype=float)
-        except (TypeError, ValueError):
-            raise TypeError("controls must be a (K, 2) or (K, N, 2) array of torques") from None
+        dt_grid = control_dt = positive_time(control_dt, "control_dt")
+        u = real_array(controls, "controls", "a (K, 2) or (K, N, 2) array of torques")
         if u.ndim == 2 and u.shape[1] == 2:
             u = np.broadcast_to(u[:, None, :], (u.shape[0], n, 2))
         if u.ndim != 3 or u.shape[1:] != (n, 2) or u.shape[0] == 0:
@@ -197,20 +196,30 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
         if bad.any():
             k, i, _ = np.argwhere(bad)[0]
             raise ValueError(f"controls[{k}] for penny {i} is not finite")
-        k_steps = int(np.ceil(t_final / control_dt - 1e-12))
+        k_steps, last_dt = interval_grid(t_final, control_dt)
         if k_steps > u.shape[0]:
             raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * control_dt} (K * control_dt)")
-        dts = [control_dt] * (k_steps - 1) + [t_final - control_dt * (k_steps - 1)]
-        acc = [(u[k, :, 0] / params.J, u[k, :, 1] / params.rolling_inertia) for k in range(k_steps)]
+        accel = lambda k: (u[k, :, 0] / params.J, u[k, :, 1] / params.rolling_inertia)  # noqa: E731
+    step = _stepper(params, tab, law, settings, backend)
     envs, times, ends, posts = [], [], [], []
     t0 = 0.0
-    for (acc1, acc2), dt in zip(acc, dts):
+    recorded = 0
+    for k in range(k_steps):
+        dt = dt_grid if k < k_steps - 1 else last_dt
+        acc1, acc2 = accel(k)
+        check_speed_bound(S, acc1, acc2, dt, params, "controls" if controls is not None else "states",
+                          k if controls is not None else None)
         S, log = step(S, acc1, acc2, dt)
         if log is not None:
             envs.append(log[0])
             times.append(t0 + log[1])
             ends.append(log[2])
             posts.append(log[3])
+            recorded += log[0].size
+            if recorded > BATCH_IMPACTS_PER_LIMIT * settings.max_impacts:
+                raise ValueError(f"t_final={t_final!r}: the batch recorded more than {BATCH_IMPACTS_PER_LIMIT} x "
+                                 f"SolverSettings.max_impacts = {BATCH_IMPACTS_PER_LIMIT * settings.max_impacts} impacts "
+                                 f"by t = {t0 + dt:.6g} s (bounded memory); ask for less or raise SolverSettings.max_impacts")
         t0 += dt
     if envs:
         env = np.concatenate(envs)

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import penny_env as pe
+import penny_env.batch as pb
 
 
 @pytest.mark.parametrize("field", ["R", "m", "I", "J"])
@@ -113,3 +114,37 @@ def test_non_convex_custom_table_is_refused():
         return 2 * (r - 1) * x / r, 2 * (r - 1) * y / r
     with pytest.raises(ValueError):
         pe.ConvexTable(h, grad, grad_bound=1.0, hessian_bound=50.0, extent=(-2, 2, -2, 2))
+
+
+# -- types and extreme values (issue 12 item 5; the hypothesis matrix is in test_input_types.py) --
+@pytest.mark.parametrize("field, value", [("Ellipse.a", 1e-300), ("Ellipse.b", 1e300), ("Circle.r", 5e-324),
+                                          ("Stadium.radius", 1e-200), ("Stadium.length", 1e200)])
+def test_extreme_table_sizes_are_value_errors(field, value):
+    make = {"Ellipse.a": lambda v: pe.Ellipse(v, 1.0), "Ellipse.b": lambda v: pe.Ellipse(1.0, v),
+            "Circle.r": pe.Circle, "Stadium.radius": lambda v: pe.Stadium(v, 0.1),
+            "Stadium.length": lambda v: pe.Stadium(0.1, v)}[field]
+    with pytest.raises(ValueError, match=field.split(".")[1]):  # was ZeroDivisionError for Ellipse(1e-300, 1)
+        make(value)
+
+
+@pytest.mark.parametrize("call", [
+    lambda: pe.simulate([0.0, 0.0, 0.0, 0.3, 1.0, 0.2], table=pe.Circle(0.2), t_final=1.0, settings={"zeno_impacts": 3}),
+    lambda: pb.simulate([[0.0, 0.0, 0.0, 0.3, 1.0, 0.2]], table=pe.Circle(0.2), t_final=1.0, settings="fast"),
+    lambda: pe.simulate([0.0, 0.0, 0.0, 0.3, 1.0, 0.2], params={"R": 0.01}, table=pe.Circle(0.2), t_final=1.0),
+])
+def test_params_and_settings_objects_of_the_wrong_type(call):
+    with pytest.raises(TypeError, match="settings|params"):
+        call()
+
+
+@pytest.mark.parametrize("end, exc", [(True, TypeError), ("1", TypeError), (None, TypeError), (2, ValueError)])
+def test_impact_map_end_types(end, exc):
+    with pytest.raises(exc, match="end"):
+        pe.impact_map([0.19, 0, 0, 0, 1, 0], table=pe.Circle(0.2), end=end)
+    with pytest.raises(exc, match="ends"):
+        pb.impact_map([[0.19, 0, 0, 0, 1, 0]], [end], table=pe.Circle(0.2))
+
+
+def test_penny_params_true_is_not_one():
+    with pytest.raises(TypeError, match="R"):  # R=True used to give R = 1.0
+        pe.PennyParams(R=True)

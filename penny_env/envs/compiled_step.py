@@ -96,7 +96,7 @@ def _step_env(i, S, trig, actions, p, m, k, target, arc, count, dist, steps, tim
     if p.plane or certified_free_trig(s, trig[2, i], trig[3, i], acc1, acc2, p.dt, m):  # noqa: F821
         s1 = flow1(s, acc1, acc2, p.dt, m.R)  # noqa: F821
     else:
-        s1, impacts, _, _ = advance_m(s, acc1, acc2, p.dt, m, 0)  # noqa: F821
+        s1, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, m)  # noqa: F821
         n = len(impacts)
         for j in range(n):
             t_j, end, post = impacts[j]
@@ -179,7 +179,7 @@ def compiled_env_functions() -> dict:
     jit = numba.njit(cache=True)
     namespace = dict(vars(tasks), __builtins__=builtins, math=math, np=np, ARRAY=numba_math, numba_math=numba_math,
                      prange=numba.prange)
-    for name in ("certified_free_trig", "flow1", "advance_m"):
+    for name in ("certified_free_trig", "flow1", "advance_through_m"):
         namespace[name] = phys[name]
     for f in (tasks.on_arc, tasks.step_reward):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
@@ -189,7 +189,7 @@ def compiled_env_functions() -> dict:
     namespace["step_env"] = compiled.jit_copy(_step_env, namespace, numba.njit(cache=True, inline="always"))
     _COMPILED = {"step_envs": compiled.jit_copy(_step_envs, namespace, numba.njit(parallel=True, cache=True)),
                  "observe_rows": compiled.jit_copy(_observe_rows, namespace, jit),
-                 "advance_m": phys["advance_m"]}
+                 "advance_through_m": phys["advance_through_m"]}
     return _COMPILED
 
 
@@ -221,7 +221,7 @@ class CompiledStep:
         obs = np.empty((1, self.obs_dim), dtype=np.float32)
         self.observe_rows(np.zeros(1, dtype=np.int64), S, trig, np.zeros((2, 1)), np.zeros(1, dtype=np.int64), obs)
         self.step(S, trig, np.zeros((1, self.p.n_act)), np.zeros(1, dtype=bool), np.zeros((2, 1)), np.zeros((2, 1)), *state())
-        self.fns["advance_m"]((0.0, 0.0, 0.0, 0.0, 1e-3, 0.0), 0.0, 0.0, 1e-9, self.m, 0)
+        self.fns["advance_through_m"]((0.0, 0.0, 0.0, 0.0, 1e-3, 0.0), 0.0, 0.0, 1e-9, self.m)
 
     def step(self, S, trig, actions, skip, target, arc, count, dist, steps, time):
         """(new S, obs, reward, terminated, truncated, impacts, impact_times, impact_ends,
@@ -247,7 +247,7 @@ class CompiledStep:
             ends = np.concatenate([ends, np.zeros((n, K - cap), dtype=np.int8)], axis=1)
             for i in np.flatnonzero(n_imp > cap):
                 s = tuple(float(v) for v in S[:, i])
-                _, impacts, _, _ = self.fns["advance_m"](s, float(acc[0, i]), float(acc[1, i]), self.p.dt, self.m, 0)
+                _, impacts, _, _ = self.fns["advance_through_m"](s, float(acc[0, i]), float(acc[1, i]), self.p.dt, self.m)
                 times[i, : len(impacts)] = [imp[0] for imp in impacts]
                 ends[i, : len(impacts)] = [imp[1] for imp in impacts]
         else:

@@ -42,14 +42,14 @@ class ScalarPhysics:
         if compiled:
             from ..physics.compiled import compiled_functions
             fns = compiled_functions()
-        self._flow1, self._certified_flow1, self._advance_m = fns["flow1"], fns["certified_flow1"], fns["advance_m"]
+        self._flow1, self._certified_flow1, self._advance_m = fns["flow1"], fns["certified_flow1"], fns["advance_through_m"]
         self.compiled = compiled
         if compiled:  # load the machine code now (numba compiles or reads its cache at the first call)
             rest = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             self._flow1(rest, 0.0, 0.0, 1e-9, self.R)
             if table is not None:
                 self._certified_flow1(rest, 0.0, 0.0, 1e-9, self.model)
-                self._advance_m(rest, 0.0, 0.0, 1e-9, self.model, 0)
+                self._advance_m(rest, 0.0, 0.0, 1e-9, self.model)
 
     def certified_free(self, s, acc1, acc2, dt):
         """:func:`certified_free` for one penny (the same kernels, for floats)."""
@@ -63,7 +63,7 @@ class ScalarPhysics:
         free, s1 = self._certified_flow1(s, acc1, acc2, dt, self.model)
         if free:
             return s1, (), ()
-        s, impacts, rests, _ = self._advance_m(s, acc1, acc2, dt, self.model, 0)
+        s, impacts, rests, _ = self._advance_m(s, acc1, acc2, dt, self.model)  # advance_through_m
         if self.compiled:  # numba's typed lists as Python lists
             impacts, rests = list(impacts), list(rests)
         return s, impacts, rests

@@ -20,6 +20,7 @@ from typing import Any
 
 from ..physics import PennyParams, make_law, make_table
 from ..physics.tables import Table
+from ..physics.validation import check_actuation, check_table
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 
@@ -152,9 +153,18 @@ class Scene:
         object.__setattr__(self, "obs_scale", {k: _num(f"{o}.obs_scale", k, v, positive=True) for k, v in sc.items()})
         object.__setattr__(self, "arena", _num(o, "arena", self.arena, positive=True))
         R = p["R"]
+        penny = PennyParams(**p)
+        try:  # documented limits that bound the work of a step (physics.validation, docs/physics.md#limits)
+            check_actuation(penny, self.torque_limits["u1"], self.torque_limits["u2"], self.control_dt)
+        except ValueError as exc:
+            raise ConfigError(f"{o}.{exc}") from None
         if t is not None:
             if not t.inradius > R:
                 raise ConfigError(f"{o}.table is too small for the penny: inradius {t.inradius:.4g} m <= R = {R:.4g} m")
+            try:
+                check_table(t, penny)
+            except ValueError as exc:
+                raise ConfigError(f"{o}.{exc}") from None
             fmax = 1.0 - R / t.inradius
             if out["spawn_fraction"] > fmax:
                 raise ConfigError(f"{o}.init.spawn_fraction must be <= 1 - R / inradius = {fmax:.6g} "

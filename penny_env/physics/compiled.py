@@ -240,7 +240,7 @@ def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
         if certified_free1(s, a1, a2, dt, m):  # noqa: F821
             s1 = flow1(s, a1, a2, dt, m.R)  # noqa: F821
         else:
-            s1, impacts, rests, elapsed = advance_resumed(s, a1, a2, dt, m)  # noqa: F821
+            s1, impacts, rests, _ = advance_through_m(s, a1, a2, dt, m)  # noqa: F821
             k = len(impacts)
             for j in range(min(k, cap)):
                 times[i, j] = impacts[j][0]
@@ -294,7 +294,7 @@ class CompiledBatch:
         zero = np.zeros(1)
         self.states_and_impacts(S, zero, zero, 1e-9)
         if not self.plane:
-            self._fns["advance_resumed"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model)
+            self._fns["advance_through_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model)
 
     def first_impacts(self, S, acc1, acc2, horizon, rounds=64):
         """(t_hit (N,), end (N,) int8) of scalar.first_impact_resumed for each penny, in parallel."""
@@ -341,7 +341,7 @@ class CompiledBatch:
         post[stored] = posts[env[stored], rank[stored]]
         for i in np.flatnonzero(counts > cap):  # more impacts than the buffer holds: rerun this penny alone
             s = tuple(float(v) for v in S[:, i])
-            impacts = self._fns["advance_resumed"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model)[1]
+            _, impacts, _, _ = self._fns["advance_through_m"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model)
             rows = np.flatnonzero(env == i)
             t[rows] = [imp[0] for imp in impacts]
             e[rows] = [imp[1] for imp in impacts]

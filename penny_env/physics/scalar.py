@@ -65,6 +65,7 @@ class Model(NamedTuple):
     delta: float         # contact tolerance [m]
     e: float             # the law's coefficient (restitution e)
     law: int             # index of the law's update function in laws.COMPILED_LAWS
+    elastic: bool        # the law keeps the kinetic energy: an accumulation never brings the penny to rest
     max_search_steps: int
     zeno_impacts: int
     zeno_window: float
@@ -151,7 +152,7 @@ def _build_model(params, table, law, settings):
         third, D3, jump = third_order(table)
         G, L, delta = float(table.grad_bound), float(table.hessian_bound), settings.contact_tol * table.size
     return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta,
-                 float(law.e), law_index(law.update), int(settings.max_search_steps), int(settings.zeno_impacts),
+                 float(law.e), law_index(law.update), law.kind == "elastic", int(settings.max_search_steps), int(settings.zeno_impacts),
                  float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
 
@@ -377,7 +378,15 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
     """One penny over one control interval with walls (module docstring); stop_after <= 0: no limit.
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
-    rests a list of (time, pinned)."""
+    rests a list of (time, pinned). The call stops early, right after an impact, with elapsed < dt
+    and the state reached (speeds untouched), after stop_after impacts or after m.max_events impacts
+    (SolverSettings.max_events_per_interval: it bounds the work and the impact list of one call,
+    never the physics); the caller resumes from there (:func:`advance_through_m`).
+
+    Only an accumulation brings a penny to rest: m.zeno_impacts consecutive impacts each closer
+    than the time-resolution window to the previous one, under a dissipative law. An elastic
+    penny is never stopped (it keeps its energy; tables too narrow for the search to resolve its
+    impacts are refused up front, validation.check_table)."""
     R = m.R
     impacts = [(0.0, 0, s)]  # typed by example (numba); removed below
     rests = [(0.0, False)]
@@ -410,7 +419,7 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
         window = max(m.zeno_window, 8.0 * time_resolution(delta, M, SCALAR))
         streak = streak + 1 if t_hit < window else 0
         done = False
-        if streak >= m.zeno_impacts or n_events >= m.max_events:
+        if streak >= m.zeno_impacts and not m.elastic:
             post = (post[0], post[1], post[2], post[3], 0.0, 0.0)
             streak = 0
             pinned = pushes_out1(post, acc1, acc2, m, 64 * delta)
@@ -419,27 +428,30 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
                 done = True
                 elapsed = dt
         impacts.append((t_impact, end, post))
-        if stop_after > 0 and n_events >= stop_after:
+        if (stop_after > 0 and n_events >= stop_after) or n_events >= m.max_events:
             done = True
         s = post
         if done:
             return s, impacts, rests, elapsed
 
 
-def advance_resumed(s, acc1, acc2, dt, m):
-    """advance_m over the whole interval: resumed while it stops early (its per-call work cap), the
-    impacts' times since the interval's start. Returns (state, impacts, rests, elapsed)."""
-    s1, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, 0)
+def advance_through_m(s, acc1, acc2, dt, m):
+    """:func:`advance_m` over the whole interval: resumes after each call that the per-call event cap
+    stopped early. Returns (state, impacts, rests, dt) with the times counted from the interval's start."""
+    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, 0)
     while elapsed < dt:
-        s1, more, more_rests, e = advance_m(s1, acc1, acc2, dt - elapsed, m, 0)
-        for imp in more:
-            impacts.append((imp[0] + elapsed, imp[1], imp[2]))
-        for r in more_rests:
-            rests.append((r[0] + elapsed, r[1]))
-        if e == 0.0 and len(more) == 0:
+        rem = dt - elapsed
+        s, more, more_rests, step = advance_m(s, acc1, acc2, rem, m, 0)
+        for k in range(len(more)):
+            t_k, end_k, post_k = more[k]
+            impacts.append((elapsed + t_k, end_k, post_k))
+        for k in range(len(more_rests)):
+            t_k, pinned_k = more_rests[k]
+            rests.append((elapsed + t_k, pinned_k))
+        if not step < rem:  # reached the interval's end
             break
-        elapsed += e
-    return s1, impacts, rests, elapsed
+        elapsed += step
+    return s, impacts, rests, dt
 
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------
@@ -447,8 +459,12 @@ def advance1(s, acc1, acc2, dt, params, table, law, settings, stop_after=None):
     """One penny over one control interval, from the physics objects (builds the Model).
 
     Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
-    rests a list of (time, pinned)."""
+    rests a list of (time, pinned). Without stop_after the whole interval is run (elapsed = dt,
+    resumed past the per-call event cap, :func:`advance_through_m`); with it the call stops right
+    after stop_after impacts or at the cap (elapsed < dt), and the caller resumes."""
     if table is None:
         return flow1(s, acc1, acc2, dt, params.R), [], [], dt
     model = scalar_model(params, table, law, settings)
-    return advance_m(tuple(s), acc1, acc2, dt, model, 0 if stop_after is None else int(stop_after))
+    if stop_after is None:
+        return advance_through_m(tuple(s), acc1, acc2, dt, model)
+    return advance_m(tuple(s), acc1, acc2, dt, model, int(stop_after))

@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 
-from .scalar import advance1, flow1, relocate1, scalar_model
+from .scalar import advance_m, certified_flow1, flow1, relocate1, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
-from .params import DEFAULT_SETTINGS, PennyParams, SolverSettings
-from .validation import (as_state, check_controls, check_inside, check_params, check_table,
-                         positive_count, positive_time)
+from .params import PennyParams, SolverSettings
+from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
+                         check_table, is_real, positive_count, positive_time)
 
 
 @dataclass
@@ -20,9 +20,11 @@ class Trajectory:
 
     impact_times (k,), impact_ends (k,) (+1 front, -1 back), impact_states (k, 6) (the state
     right after each impact), final_state (6,), final_time. rest_times: times at which an
-    accumulation of impacts (Zeno) brought the penny to rest. complete: False when n_impacts
-    were asked for but the penny provably never hits the wall again (uncontrolled periodic
-    motion away from the wall, or at rest). states_at(times) evaluates the trajectory exactly.
+    accumulation of impacts (Zeno) brought the penny to rest. complete: True when the run reached
+    what it was asked for (t_final, or n_impacts impacts, whichever came first); False only when
+    n_impacts were asked for without t_final and the penny provably never hits the wall again
+    (uncontrolled periodic motion clear of the wall, or at rest): final_time is then the time at
+    which that was proven. states_at(times) evaluates the trajectory exactly.
     """
 
     impact_times: np.ndarray
@@ -57,6 +59,18 @@ class Trajectory:
         return kinetic_energy(self.impact_states.T, self.params)
 
 
+FREE_INTERVAL = 0.1  # [s] intervals of an uncontrolled run to t_final (penny_env.batch.simulate uses the same)
+MAX_INTERVALS = 1_000_000  # intervals of FREE_INTERVAL in one batch.simulate call (bounded work): t_final <= 1e5 s
+
+
+def interval_grid(t_final, dt):
+    """(number of intervals, length of the last one) for intervals of length dt up to t_final; the
+    last one ends exactly at t_final. simulate() and penny_env.batch.simulate share this grid, so
+    a penny takes the same intervals (hence bitwise the same steps) in both."""
+    k_steps = max(1, int(math.ceil(t_final / dt - 1e-12)))
+    return k_steps, t_final - dt * (k_steps - 1)
+
+
 def _free_chunk(state, params, table):
     """Uncontrolled motion is periodic (period 2 pi / |phi_dot|) or a straight line that leaves
     any table within (table width) / speed: a chunk of this length with no impact means the
@@ -78,11 +92,14 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     Stops at t_final, or right after the n_impacts-th impact, whichever comes first (at least
     one must be given; with controls, t_final defaults to len(controls) * control_dt).
     controls: (K, 2) rows of torques (u1, u2), row k held on [k, k+1) * control_dt.
+    settings: SolverSettings. Work and memory are bounded: inputs beyond the documented limits
+    (speeds, steering phase per interval, SolverSettings.max_impacts; docs/physics.md, Limits)
+    raise a ValueError naming the field and the limit.
     """
     params = check_params(params)
     table = check_table(table, params)
     law = make_law(law)
-    settings = DEFAULT_SETTINGS if settings is None else settings
+    settings = check_settings(settings)
     s = as_state(state)
     u, cdt = check_controls(controls, control_dt)
     if t_final is not None:
@@ -91,6 +108,9 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         n_impacts = positive_count(n_impacts, "n_impacts")
         if table is None:
             raise ValueError("n_impacts needs a table: the open plane has no impacts")
+        if n_impacts > settings.max_impacts:
+            raise ValueError(f"n_impacts={n_impacts} is beyond the limit SolverSettings.max_impacts = "
+                             f"{settings.max_impacts} (bounded memory); raise it or split the run")
     if u is not None:
         horizon = u.shape[0] * cdt
         if t_final is None:
@@ -105,56 +125,103 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     if table is not None:
         state = relocate1(state, scalar_model(params, table, law, settings))
 
+    # the intervals: the control intervals; without controls, batch.simulate's grid of FREE_INTERVAL
+    # for runs to t_final alone that it would accept (so that both give bitwise the same), else one
+    # free period each (see _free_chunk), which lets a run with rare impacts take few intervals
+    grid = cdt
+    if u is None and n_impacts is None and interval_grid(t_final, FREE_INTERVAL)[0] <= MAX_INTERVALS:
+        grid = FREE_INTERVAL
+    if grid is not None:
+        k_steps, last_dt = interval_grid(t_final, grid)
+        if u is not None and k_steps > u.shape[0]:
+            raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * cdt} (len(controls) * control_dt)")
+    model = None if table is None else scalar_model(params, table, law, settings)
     times, ends, states, rests = [], [], [], []
-    seg_t, seg_s, seg_acc = [0.0], [state], []
-    t = 0.0
+    # dense output: segments (start time, start state, accelerations), one per impact and per control
+    # interval (free motion needs none at interval boundaries: the flow from the last start is exact)
+    seg_t, seg_s, seg_acc = [0.0], [state], [(0.0, 0.0)]
+    t0 = 0.0          # start of the current interval
     complete = True
     k = 0
     while True:
+        acc1 = acc2 = 0.0
         if u is not None:
             acc1, acc2 = float(u[k, 0]) / params.J, float(u[k, 1]) / params.rolling_inertia
-            chunk = min(cdt * (k + 1), t_final) - t
-        else:
-            acc1 = acc2 = 0.0
-            chunk = _free_chunk(state, params, table)
+        if grid is not None:
+            dt = grid if k < k_steps - 1 else last_dt
+        else:  # one free period per interval (see _free_chunk)
+            dt = _free_chunk(state, params, table)
             if t_final is not None:
-                chunk = min(chunk, t_final - t)
-            elif chunk == math.inf:  # at rest, no impact ever
-                complete = False
+                dt = min(dt, t_final - t0)
+        seg_acc[-1] = (acc1, acc2)
+        if dt == math.inf:  # at rest without controls and without t_final: no impact ever
+            complete = False
+            t = t0
+            break
+        check_speed_bound(state, acc1, acc2, dt, params, "controls" if u is not None else "state",
+                          k if u is not None else None)
+        # the interval, resumed wherever the per-call event cap stopped it (as scalar.advance_through_m)
+        off = 0.0
+        hit = False
+        while True:
+            left = None if n_impacts is None else n_impacts - len(times)
+            rem = dt - off
+            free, s1 = (True, flow1(state, acc1, acc2, rem, params.R)) if model is None else \
+                certified_flow1(state, acc1, acc2, rem, model)
+            if free:  # the search's first step certifies the interval free of impacts: what advance_m returns
+                state, impacts, rest_events, elapsed = s1, (), (), rem
+            else:
+                state, impacts, rest_events, elapsed = advance_m(state, acc1, acc2, rem, model,
+                                                                 0 if left is None else left)
+            if len(times) + len(impacts) > settings.max_impacts:
+                asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
+                raise ValueError(f"{asked}: the run passed SolverSettings.max_impacts = {settings.max_impacts} "
+                                 f"impacts at t = {t0 + off + elapsed:.6g} s (bounded memory); ask for fewer, continue "
+                                 "from a shorter run's final_state, or raise SolverSettings.max_impacts")
+            for ti, end, post in impacts:
+                times.append(t0 + (off + ti))
+                ends.append(end)
+                states.append(post)
+                seg_t.append(times[-1])
+                seg_s.append(post)
+                seg_acc.append((acc1, acc2))
+            for tr, pinned in rest_events:
+                rests.append(t0 + (off + tr))
+                if pinned:  # held against the wall until the interval ends
+                    seg_acc[-1] = (0.0, 0.0)
+            hit = hit or bool(impacts)
+            if n_impacts is not None and len(times) >= n_impacts:
                 break
-        seg_acc.append((acc1, acc2))
-        left = None if n_impacts is None else n_impacts - len(times)
-        state, impacts, rest_events, elapsed = advance1(state, acc1, acc2, chunk, params, table, law, settings,
-                                                        stop_after=left)
-        for ti, end, post in impacts:
-            times.append(t + ti)
-            ends.append(end)
-            states.append(post)
-            seg_t.append(t + ti)
-            seg_s.append(post)
-            seg_acc.append((acc1, acc2))
-        for tr, pinned in rest_events:
-            rests.append(t + tr)
-            if pinned:  # held against the wall until the interval ends
-                seg_acc[-1] = (0.0, 0.0)
-        t += elapsed
+            if not elapsed < rem:
+                break
+            off += elapsed
         if n_impacts is not None and len(times) >= n_impacts:
             t = times[-1]
             break
-        if t_final is not None and t >= t_final * (1 - 1e-15):
+        if grid is None and t_final is None and state[4] == 0.0 and state[5] == 0.0:
+            complete = False  # brought to rest (rest_times): n_impacts cannot be reached
+            t = times[-1]
+            break
+        t0 += dt
+        if (grid is not None and k >= k_steps - 1) or (grid is None and t_final is not None and t0 >= t_final * (1 - 1e-15)):
             t = t_final
             break
-        if u is None and not impacts:
-            # a whole free chunk without an impact: none ever again (_free_chunk)
-            complete = False
-            if t_final is not None:
-                state = flow1(state, 0.0, 0.0, t_final - t, params.R)
+        k += 1
+        if u is None and not hit and (grid is None or (state[4] == 0.0 and state[5] == 0.0)):
+            # no impact ever again: a free period without one (_free_chunk), or at rest. (On the grid, a
+            # penny on an orbit tangent to the wall can still graze it after round-off, so the grid
+            # runs on, as batch.simulate does.)
+            if t_final is None:
+                complete = False  # n_impacts cannot be reached
+                t = t0
+            else:  # one flow to t_final (batch.simulate would take the remaining FREE_INTERVAL steps)
+                state = flow1(state, 0.0, 0.0, t_final - t0, params.R)
                 t = t_final
             break
-        if u is not None and t >= cdt * (k + 1) * (1 - 1e-15):
-            k += 1
-            seg_t.append(t)
+        if u is not None:  # the next control interval starts a new segment
+            seg_t.append(t0)
             seg_s.append(state)
+            seg_acc.append((0.0, 0.0))  # set at the top of the loop
     S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
     return Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
@@ -175,7 +242,9 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     table = check_table(table, params)
     law = make_law(law)
     s = as_state(state)
-    if isinstance(end, bool) or end not in (1, -1):
+    if not is_real(end):
+        raise TypeError(f"end must be +1 (front) or -1 (back), got {type(end).__name__}")
+    if end not in (1, -1):
         raise ValueError(f"end must be +1 (front) or -1 (back), got {end!r}")
     S = s[:, None]
     px, py, _, _ = end_kinematics(S, float(end), params.R)

@@ -1,43 +1,162 @@
-"""Input checks shared by the public physics API: clear errors that name the field."""
+"""Input checks shared by the public physics API: clear errors that name the field.
+
+A wrong type (a string, a complex number, a boolean, None, a non-numeric object) is a TypeError
+naming the field; a value of the right type that is out of range (NaN, inf, negative, beyond a
+documented limit) is a ValueError naming the field. numpy's own conversions are not trusted for
+this: ``np.array("1.5", dtype=float)`` parses strings and ``float(True)`` is 1.0, so every numeric
+input goes through :func:`real` or :func:`real_array`, which check the type first.
+"""
 from __future__ import annotations
+
+import math
+import numbers
 
 import numpy as np
 
 from .flows import end_kinematics
-from .params import PennyParams
+from .params import (DEFAULT_SETTINGS, MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MAX_STEERED_PHASE, MIN_GAP,
+                     PennyParams, SolverSettings)
 from .tables import as_table
 
 STATE_FIELDS = ("x", "y", "theta", "phi", "theta_dot", "phi_dot")
 
 
+def is_real(value) -> bool:
+    """A real number of a numeric type: int, float or a numpy integer/float scalar (not bool)."""
+    return (isinstance(value, (numbers.Real, np.integer, np.floating))
+            and not isinstance(value, (bool, np.bool_)))
+
+
+def real(value, name: str) -> float:
+    """value as a finite float, or TypeError (not a real number) / ValueError (not finite) naming name."""
+    if not is_real(value):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return value
+
+
+def real_array(value, name: str, what: str) -> np.ndarray:
+    """A float64 copy of an array-like of real numbers (ints or floats, not bools, strings,
+    complex numbers or None), or a TypeError naming name; what describes the expected shape."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be {what}, got {type(value).__name__}")
+    if not isinstance(value, np.ndarray):
+        # nested sequences: numpy would turn [True, 0] into ints and ["1.5"] into floats, so look at each entry
+        try:
+            entries = np.asarray(value, dtype=object)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be {what} (ragged or unreadable input)") from None
+        for v in entries.flat:
+            if not is_real(v):
+                raise TypeError(f"{name} must be {what} of real numbers, got an entry of type {type(v).__name__}")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {what} (ragged or unreadable input)") from None
+    if arr.dtype.kind not in "iuf":
+        kind = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "strings", "O": "non-numeric entries"}
+        raise TypeError(f"{name} must be {what} of real numbers, got {kind.get(arr.dtype.kind, arr.dtype.name)}")
+    return np.array(arr, dtype=float)
+
+
 def as_state(state, name: str = "state") -> np.ndarray:
     """A length-6 float64 copy of state, or a ValueError/TypeError naming what is wrong."""
-    try:
-        arr = np.array(state, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a length-6 array of floats {STATE_FIELDS}") from None
+    arr = real_array(state, name, f"a length-6 array {STATE_FIELDS}")
     if arr.shape != (6,):
         raise ValueError(f"{name} must have shape (6,) = {STATE_FIELDS}, got shape {arr.shape}")
     bad = ~np.isfinite(arr)
     if bad.any():
         fields = [STATE_FIELDS[i] for i in np.flatnonzero(bad)]
         raise ValueError(f"{name} has non-finite entries: {', '.join(fields)}")
+    check_speeds(arr[None, :], name)
     return arr
 
 
 def as_states(states, name: str = "states") -> np.ndarray:
     """(N, 6) float64 copy of a batch of states, checked; returned as (6, N)."""
-    try:
-        arr = np.array(states, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be an (N, 6) array of floats") from None
+    arr = real_array(states, name, "an (N, 6) array")
     if arr.ndim != 2 or arr.shape[1] != 6:
         raise ValueError(f"{name} must have shape (N, 6), got {arr.shape}")
     bad = ~np.isfinite(arr)
     if bad.any():
         rows, cols = np.nonzero(bad)
         raise ValueError(f"{name}[{rows[0]}] has a non-finite {STATE_FIELDS[cols[0]]}")
+    check_speeds(arr, name)
     return np.ascontiguousarray(arr.T)
+
+
+def check_speeds(rows: np.ndarray, name: str) -> None:
+    """|theta_dot| and |phi_dot| of (N, 6) rows within MAX_ANGULAR_SPEED (bounded work per call)."""
+    fast = np.abs(rows[:, 4:6]) > MAX_ANGULAR_SPEED
+    if fast.any():
+        i, j = np.argwhere(fast)[0]
+        where = f"{name}[{i}]" if rows.shape[0] > 1 or name.endswith("s") else name
+        raise ValueError(f"{where}: |{STATE_FIELDS[4 + j]}| = {abs(rows[i, 4 + j]):.6g} rad/s is beyond the limit "
+                         f"MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s (docs/physics.md, Limits)")
+
+
+def check_speed_bound(state, acc1, acc2, dt, params: PennyParams, name: str, k=None) -> None:
+    """Refuse (ValueError naming name and the limit) a controlled interval that would take the penny
+    beyond MAX_ANGULAR_SPEED (|theta_dot| + |acc2| dt or |phi_dot| + |acc1| dt from the interval's
+    start state), or whose steering torque would sweep more than MAX_STEERED_PHASE radians of
+    heading (the work of the flow's quadrature grows with it). Free intervals (no torque) are not
+    limited: their flow is in closed form and impacts never add energy. state: a 6-tuple with float
+    accelerations, or a (6, N) array with (N,) accelerations (dt a float)."""
+    if isinstance(state, tuple):  # one penny, plain floats (simulate's loop: no numpy overhead)
+        if acc1 == 0.0 and acc2 == 0.0:
+            return
+        w_end = abs(state[5]) + abs(acc1) * dt
+        if (abs(state[4]) + abs(acc2) * dt <= MAX_ANGULAR_SPEED and w_end <= MAX_ANGULAR_SPEED
+                and (acc1 == 0.0 or w_end * dt <= MAX_STEERED_PHASE)):
+            return
+    acc1, acc2 = np.asarray(acc1, dtype=float), np.asarray(acc2, dtype=float)
+    W_end = np.abs(np.asarray(state[4])) + np.abs(acc2) * dt
+    w_end = np.abs(np.asarray(state[5])) + np.abs(acc1) * dt
+    controlled = (acc1 != 0.0) | (acc2 != 0.0)
+    too_fast = controlled & ((W_end > MAX_ANGULAR_SPEED) | (w_end > MAX_ANGULAR_SPEED))
+    steered = (acc1 != 0.0) & (w_end * dt > MAX_STEERED_PHASE)
+    bad = np.atleast_1d(too_fast | steered)
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    where = name if k is None else f"{name}[{k}]"
+    if bad.size > 1:
+        where += f" (penny {i})"
+    Wm, wm = float(np.atleast_1d(W_end)[i]), float(np.atleast_1d(w_end)[i])
+    if np.atleast_1d(too_fast)[i]:
+        raise ValueError(f"{where}: over this interval ({dt:.6g} s) the torques would take the penny to |theta_dot| = "
+                         f"{Wm:.3g} or |phi_dot| = {wm:.3g} rad/s, beyond the limit MAX_ANGULAR_SPEED = "
+                         f"{MAX_ANGULAR_SPEED:g} rad/s (bounded work per call; docs/physics.md, Limits)")
+    raise ValueError(f"{where}: under a steering torque the heading could sweep {wm * dt:.3g} rad in one interval "
+                     f"({dt:.6g} s), beyond the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad (bounded work per "
+                     "call; use shorter control intervals; docs/physics.md, Limits)")
+
+
+def check_actuation(params: PennyParams, u1_max: float, u2_max: float, control_dt: float) -> None:
+    """An environment's actuation within the documented limits (bounded work per step): control_dt
+    <= MAX_CONTROL_DT, and one step at the torque limits adds at most MAX_ANGULAR_SPEED to
+    |phi_dot| or |theta_dot| and sweeps at most MAX_STEERED_PHASE of heading. ValueError naming the
+    field and the limit."""
+    if control_dt > MAX_CONTROL_DT:
+        raise ValueError(f"control_dt = {control_dt!r} s is beyond the limit MAX_CONTROL_DT = {MAX_CONTROL_DT:g} s")
+    for name, gain in (("u1", u1_max * control_dt / params.J), ("u2", u2_max * control_dt / params.rolling_inertia)):
+        if gain > MAX_ANGULAR_SPEED:
+            raise ValueError(f"torque_limits.{name} = {u1_max if name == 'u1' else u2_max!r} N m adds {gain:.3g} rad/s in "
+                             f"one control_dt, beyond the limit MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s")
+    sweep = u1_max * control_dt ** 2 / params.J
+    if sweep > MAX_STEERED_PHASE:
+        raise ValueError(f"torque_limits.u1 = {u1_max!r} N m sweeps {sweep:.3g} rad of heading in one control_dt, beyond "
+                         f"the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad")
+
+
+def check_settings(settings) -> SolverSettings:
+    if settings is None:
+        return DEFAULT_SETTINGS
+    if not isinstance(settings, SolverSettings):
+        raise TypeError(f"settings must be a SolverSettings, got {type(settings).__name__}")
+    return settings
 
 
 def check_params(params) -> PennyParams:
@@ -54,6 +173,11 @@ def check_table(table, params: PennyParams):
         return None
     if not table.inradius > params.R:
         raise ValueError(f"table: too small for the penny, its inradius {table.inradius:.6g} m is not larger than R = {params.R:.6g} m")
+    if table.inradius < params.R * (1.0 + MIN_GAP):
+        # impacts of the two ends would follow each other within the search's time resolution
+        raise ValueError(f"table: too small for the penny, its inradius {table.inradius!r} m exceeds R = {params.R!r} m "
+                         f"by less than the limit MIN_GAP = {MIN_GAP:g} R that the impact search resolves "
+                         "(docs/physics.md, Limits)")
     return table
 
 
@@ -76,10 +200,7 @@ def check_controls(controls, control_dt, n_controls: int = 2):
         if control_dt is not None:
             raise ValueError("control_dt is given but controls is None")
         return None, None
-    try:
-        u = np.array(controls, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError("controls must be an array of (u1, u2) rows") from None
+    u = real_array(controls, "controls", "a (K, 2) array of (u1, u2) rows")
     if u.ndim != 2 or u.shape[1] != n_controls or u.shape[0] == 0:
         raise ValueError(f"controls must have shape (K, 2) with K >= 1 rows of (u1, u2), got {u.shape}")
     if not np.all(np.isfinite(u)):
@@ -91,7 +212,7 @@ def check_controls(controls, control_dt, n_controls: int = 2):
 
 
 def _positive(value, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not is_real(value):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
     value = float(value)
     if not np.isfinite(value) or value <= 0:
@@ -104,7 +225,7 @@ def positive_time(value, name: str) -> float:
 
 
 def positive_count(value, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
         raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
     if value < 1:
         raise ValueError(f"{name} must be >= 1, got {value}")

@@ -102,13 +102,18 @@ class Table:
         return hash((type(self).__name__, tuple(self._fields().items())))
 
 
+LENGTH_RANGE = (1e-100, 1e100)  # table numbers outside it overflow or underflow in 1/a^2, a^2, ... (no ZeroDivisionError)
+
+
 def length(owner: str, name: str, value, allow_zero: bool = False) -> float:
-    """A positive (or non-negative) finite real number, else TypeError / ValueError naming the field."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+    """A positive (or non-negative) finite real number in LENGTH_RANGE, else TypeError / ValueError naming the field."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise TypeError(f"{owner}.{name} must be a real number, got {type(value).__name__}")
     value = float(value)
     if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         raise ValueError(f"{owner}.{name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {value!r}")
+    if value != 0 and not LENGTH_RANGE[0] <= value <= LENGTH_RANGE[1]:
+        raise ValueError(f"{owner}.{name} must lie in [{LENGTH_RANGE[0]:g}, {LENGTH_RANGE[1]:g}], got {value!r}")
     return value
 
 
