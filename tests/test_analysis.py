@@ -12,9 +12,6 @@ from penny_env.analysis import reference
 pytest.importorskip("scipy")
 pytest.importorskip("matplotlib")
 
-needs_reference = pytest.mark.skipif(
-    not (reference.data_dir() / "paper_scenes.json").exists() or not (reference.data_dir() / "extra_scenes.json").exists(),
-    reason="reference data not generated (tests/reference/make_reference.py)")
 
 PAPER = ("circle_elastic", "circle_plastic", "ellipse_elastic", "ellipse_plastic")
 
@@ -40,7 +37,6 @@ def test_matching_counts_missed_and_spurious():
     assert (m.matched, m.missed, m.spurious) == (0, 1, 1)
 
 
-@needs_reference
 def test_reference_loads_as_float64():
     scenes = reference.paper_scenes()
     assert [s.name for s in scenes] == list(PAPER)
@@ -52,9 +48,8 @@ def test_reference_loads_as_float64():
     assert ctrl and ctrl[0].controls.shape[1] == 2 and ctrl[0].control_dt > 0
 
 
-@needs_reference
 def test_baselines_find_first_impacts_of_paper_elastic_circle():
-    from penny_env.analysis.baselines import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
+    from penny_env.analysis.integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
     sc = reference.paper_scenes()[0]
     assert sc.name == "circle_elastic"
     kw = dict(params=sc.params, table=sc.table, law=sc.law, n_impacts=4, t_stop=20.0)
@@ -74,7 +69,6 @@ def test_baselines_find_first_impacts_of_paper_elastic_circle():
     assert np.min(np.diff(res.impact_times)) > 0.1
 
 
-@needs_reference
 def test_bench_solvers_quick(tmp_path):
     from penny_env.analysis import bench_solvers
     out = tmp_path / "bench.md"
@@ -90,7 +84,6 @@ def test_bench_solvers_quick(tmp_path):
             assert r["m_ivp"].matched == 20
 
 
-@needs_reference
 def test_work_precision_quick(tmp_path):
     from penny_env.analysis import work_precision
     out = tmp_path / "wp.md"
@@ -105,7 +98,6 @@ def test_work_precision_quick(tmp_path):
     assert "![work-precision, impact times](wp.png)" in text
 
 
-@needs_reference
 def test_stability_quick(tmp_path):
     from penny_env.analysis import stability
     out = tmp_path / "st.md"

@@ -75,7 +75,7 @@ def test_dynamics_report_quick(tmp_path):
 
 def test_controllability_study_quick(tmp_path):
     pytest.importorskip("matplotlib")
-    from training import controllability
+    from penny_env.analysis import controllability
     out = tmp_path / "controllability.md"
     rows = controllability.main(["--quick", "--out", str(out)])
     plane = [r for r in rows if r["scene"] == "open plane"]

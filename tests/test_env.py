@@ -48,10 +48,17 @@ def test_make_without_import():
 @pytest.mark.parametrize("env_id", IDS)
 def test_checkers_without_warnings(env_id):
     from gymnasium.utils.env_checker import check_env
-    from stable_baselines3.common.env_checker import check_env as sb3_check_env
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(gym.make(env_id, render_mode="rgb_array").unwrapped)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_sb3_checker_without_warnings(env_id):
+    pytest.importorskip("stable_baselines3", reason="Stable-Baselines3 (the penny-env[train] extra) is not installed")
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         sb3_check_env(gym.make(env_id).unwrapped)
 
 

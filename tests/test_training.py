@@ -1,11 +1,17 @@
 """The training and baseline commands run end to end in --quick mode; configs are checked."""
+import importlib.util
 import json
 
 import pytest
 
 from training import baselines, train
 
+# training.train and training.baselines run Stable-Baselines3 (the penny-env[train] extra, with torch)
+needs_sb3 = pytest.mark.skipif(importlib.util.find_spec("stable_baselines3") is None,
+                               reason="Stable-Baselines3 (the penny-env[train] extra) is not installed")
 
+
+@needs_sb3
 @pytest.mark.parametrize("config", ["configs/train/ppo_reach_ellipse.yaml", "configs/train/sac_park_circle.yaml"])
 def test_train_quick(tmp_path, config):
     results = train.main(["--config", config, "--quick", "--out", str(tmp_path)])
@@ -37,6 +43,7 @@ def test_config_errors_name_the_field(tmp_path):
         train.load_config(bad)
 
 
+@needs_sb3
 def test_baselines_quick(tmp_path):
     out = tmp_path / "baselines.md"
     baselines.main(["--quick", "--out", str(out)])

@@ -159,12 +159,13 @@ TABLES = {"circle r = 0.2": {"kind": "circle", "r": 0.2}, "ellipse 0.15 x 0.2 (p
 
 
 def main(argv=None):
-    from .common import header
+    from .common import header, report_path
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="few pennies, short times (for tests)")
-    ap.add_argument("--out", default="docs/dynamics.md")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report; PNGs go next to it (default: docs/dynamics.md under the working directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     import matplotlib
     matplotlib.use("Agg")
@@ -183,7 +184,7 @@ def main(argv=None):
         rows.append(f"| {name} | {n} | {t_final:g} | {e.size} | {q[0]:.3f} | {q[1]:.3f} | {q[2]:.3f} |")
         print(rows[-1], flush=True)
 
-    out = Path(args.out)
+    out = report_path(args.out, args.quick, "dynamics.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     start = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
     table = TABLES["ellipse 0.15 x 0.2 (paper)"]
@@ -218,6 +219,8 @@ def main(argv=None):
               "of impacts.", "", f"![reachable sets]({png.name})", ""]
     out.write_text("\n".join(lines))
     print("\n".join(lines))
+    print(f"wrote {out} and {png}")
+    return out
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ import numpy as np
 import penny_env as pe
 from penny_env.physics import advance, make_law
 from penny_env.physics.params import SolverSettings
-from penny_env.analysis.common import header
+from penny_env.analysis.common import header, report_path
 
 PAPER_STATE = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
 SCENES = [("circle", pe.Circle(0.2), "elastic"), ("circle", pe.Circle(0.2), "plastic"),
@@ -62,13 +62,14 @@ def chaos(times, n=100, seed=0, params=pe.PennyParams(), table=pe.Ellipse(0.15, 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer impacts and pennies (for tests)")
-    ap.add_argument("--out", default="docs/paper_figures.md")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report; PNGs go next to it (default: docs/paper_figures.md under the working directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(args.out)
+    out = report_path(args.out, args.quick, "paper_figures.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     n_imp = 5 if args.quick else 20
     fig, axes = plt.subplots(2, 2, figsize=(9, 9))
@@ -108,6 +109,8 @@ def main(argv=None):
               "perturbed by less than 0.005, at several times.", "", f"![chaos]({chaos_png.name})", ""]
     out.write_text("\n".join(lines))
     print("\n".join(lines))
+    print(f"wrote {out}, {scenes_png} and {chaos_png}")
+    return out
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
-"""The mpmath reference data (tests/reference/data/*.json) as float64 numpy structures.
+"""The mpmath reference data (penny_env/analysis/reference_data/*.json) as float64 numpy structures.
 
-The files are written by tests/reference/make_reference.py (50-digit mpmath, independent of the
+The files ship with the package (package data) and are written by tests/reference/make_reference.py (50-digit mpmath, independent of the
 simulator); numbers are decimal strings. This module only reads them:
 
 * :func:`paper_scenes` / :func:`extra_scenes` -> list of :class:`Scene` (params, table object, law,
@@ -8,7 +8,7 @@ simulator); numbers are decimal strings. This module only reads them:
 * :func:`flow_cases` -> list of :class:`FlowCase` (open-plane flows with constant controls);
 * :func:`impact_map_cases` -> list of :class:`ImpactMapCase` (single impacts, three laws).
 
-The data directory is ``tests/reference/data`` of the source tree, or ``$PENNY_REFERENCE_DIR``.
+The data directory is ``reference_data`` next to this module, or ``$PENNY_REFERENCE_DIR``.
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def data_dir() -> Path:
     env = os.environ.get("PENNY_REFERENCE_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[2] / "tests" / "reference" / "data"
+    return Path(__file__).resolve().parent / "reference_data"
 
 
 def _f(x) -> float:

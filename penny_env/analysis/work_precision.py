@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from . import common
-from .baselines import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
+from .integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
 from .matching import match_impacts, state_error, unresolvable_mask
 from .reference import extra_scenes, paper_scenes
 from ..physics import SolverSettings
@@ -145,13 +145,13 @@ def plot(scs, results, path_imp, path_state):
 
 def report(scs, results, argv, png_names) -> list[str]:
     L = common.header("Work-precision of penny_env and baseline integrators", "penny_env.analysis.work_precision", argv)
-    L += ["Errors are against the 50-digit mpmath reference (tests/reference/data). Impact-time error: max |t - t_ref| "
+    L += ["Errors are against the 50-digit mpmath reference (penny_env/analysis/reference_data). Impact-time error: max |t - t_ref| "
           "over the impacts matched by time and end (order-preserving alignment, penny_env.analysis.matching); "
           "missed / spurious impacts are counted separately (a method that misses a grazing impact and loses the "
           "trajectory shows a small error on the few impacts it still matches but many missed ones). "
           "State error: max abs difference of (x, y, theta, phi, theta_dot, phi_dot) at the scene's fixed time "
           "(5 s for the paper's scenes, 3 s stadium, 2 s controlled). Wall time: one run, or the best of several "
-          "when a run is short. All baselines apply penny_env's impact law at their events. Missed impacts in "
+          "when a run is short. All other integrators apply penny_env's impact law at their events. Missed impacts in "
           "brackets are below float64 resolution (the end would pass the wall by less than contact_tol x table size "
           "without the impact; see bench_solvers.md); hollow markers in the plots: missed resolvable or spurious "
           "impacts. Note that after a missed impact a method follows a different trajectory, so its error on the "
@@ -198,7 +198,7 @@ def report(scs, results, argv, png_names) -> list[str]:
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description="work-precision report of penny_env and baselines")
+    ap = argparse.ArgumentParser(description="work-precision report of penny_env and other integrators")
     ap.add_argument("--quick", action="store_true", help="fewer settings, shorter budgets")
     ap.add_argument("--out", default=None, help="Markdown report (e.g. docs/work_precision.md); PNGs go next to it")
     ap.add_argument("--all-scenes", action="store_true", help="also the restitution scene")

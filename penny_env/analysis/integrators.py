@@ -1,4 +1,4 @@
-"""Baseline hybrid integrators for the bouncing penny, and uniform runners for every method.
+"""Other hybrid integrators for the bouncing penny (to compare penny_env with), and uniform runners for every method.
 
 Only the integration differs between the methods: every impact is applied with penny_env's own
 impact law (:func:`penny_env.physics.laws.apply_law`), so the comparison measures the flow and the

@@ -1,6 +1,6 @@
 """Does controllability of the penny need impacts? (the open question of the paper's last section)
 
-    python -m training.controllability [--quick] [--samples 2000] [--out docs/controllability.md]
+    python -m penny_env.analysis.controllability [--quick] [--samples 2000] [--out docs/controllability.md]
 
 The controls are the paper's u1 (steering torque, J phi'' = u1) and u2 (rolling torque,
 (I + m R^2) theta'' = u2). Between impacts the speeds obey exactly these two equations, so with a
@@ -41,7 +41,7 @@ START = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])  # the paper's initial s
 def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[dict]:
     """One row per (actuation, scene, horizon): the range of the unactuated speed over the sampled
     reachable set, the share of sequences with impacts, and the final speeds."""
-    from penny_env.analysis.dynamics import reachable_set
+    from .dynamics import reachable_set
 
     jobs = [(act, scene, T) for act in UNACTUATED for scene in SCENES for T in horizons]
     bar = _progress(len(jobs), progress)
@@ -90,14 +90,15 @@ def verdicts(rows) -> list[str]:
 
 
 def main(argv=None):
-    from penny_env.analysis.common import header
+    from .common import header, report_path
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="few samples and one short horizon (for tests)")
     ap.add_argument("--samples", type=int, default=2000, help="control sequences per reachable set")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="docs/controllability.md")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report; PNGs go next to it (default: docs/controllability.md under the working directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     if args.samples < 1:
         ap.error(f"--samples must be >= 1, got {args.samples}")
@@ -105,11 +106,11 @@ def main(argv=None):
     horizons = (1.0,) if args.quick else (1.0, 3.0, 10.0)
     rows = study(samples, horizons, args.seed, progress=not args.quick)
 
-    out = Path(args.out)
+    out = report_path(args.out, args.quick, "controllability.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     png = out.with_name(out.stem + ".png")
     _plot(rows, max(horizons), png)
-    lines = header("Does controllability of the penny need impacts?", "training.controllability", argv)
+    lines = header("Does controllability of the penny need impacts?", "penny_env.analysis.controllability", argv)
     lines += [__doc__.split("\n\n", 2)[2].strip(), "",
               "## What the samples show", "", *verdicts(rows), "",
               f"## Unactuated speed over the sampled reachable sets ({samples} control sequences each)", "",
@@ -129,6 +130,7 @@ def main(argv=None):
               "reachable with one control and impacts (full controllability) is not settled by sampling.", ""]
     out.write_text("\n".join(lines))
     print("\n".join(lines))
+    print(f"wrote {out} and {png}")
     return rows
 
 
