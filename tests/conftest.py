@@ -86,3 +86,35 @@ def random_inside_state(rng, params, table, speed=10.0, spin=2.0, margin=0.0):
 @pytest.fixture
 def paper_state():
     return PAPER_STATE.copy()
+
+
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _reports_snapshot():
+    """Modification times of docs/* and README.md, and their `git status` where git is there."""
+    import shutil
+    import subprocess
+    paths = [os.path.join(REPO, "README.md")]
+    docs = os.path.join(REPO, "docs")
+    if os.path.isdir(docs):
+        paths += [os.path.join(docs, f) for f in sorted(os.listdir(docs))]
+    snap = {p: os.stat(p).st_mtime_ns for p in paths if os.path.exists(p)}
+    if shutil.which("git") and os.path.exists(os.path.join(REPO, ".git")):
+        run = subprocess.run(["git", "status", "--porcelain", "--", "docs", "README.md"], cwd=REPO,
+                             capture_output=True, text=True)
+        snap["git status"] = run.stdout
+    return snap
+
+
+@pytest.fixture
+def reports_untouched(tmp_path, monkeypatch):
+    """Runs the test from an empty temporary working directory, then checks that the committed reports
+    (docs/, README.md) are as they were and that nothing landed in ./docs: report commands write only
+    where --out says (a --quick run without --out: a temporary directory)."""
+    before = _reports_snapshot()
+    monkeypatch.chdir(tmp_path)
+    yield tmp_path
+    assert _reports_snapshot() == before
+    assert not os.path.exists(os.path.join(tmp_path, "docs")), "a report without --out landed in ./docs"

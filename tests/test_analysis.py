@@ -69,10 +69,10 @@ def test_baselines_find_first_impacts_of_paper_elastic_circle():
     assert np.min(np.diff(res.impact_times)) > 0.1
 
 
-def test_bench_solvers_quick(tmp_path):
+def test_bench_solvers_quick(reports_untouched):
     from penny_env.analysis import bench_solvers
-    out = tmp_path / "bench.md"
-    rows = bench_solvers.main(["--quick", "--out", str(out)])
+    out = reports_untouched / "bench.md"
+    rows = bench_solvers.main(["--quick", "--out", "bench.md"])
     text = out.read_text()
     for name in PAPER:
         assert f"| {name} |" in text
@@ -84,10 +84,11 @@ def test_bench_solvers_quick(tmp_path):
             assert r["m_ivp"].matched == 20
 
 
-def test_work_precision_quick(tmp_path):
+def test_work_precision_quick(reports_untouched):
     from penny_env.analysis import work_precision
+    tmp_path = reports_untouched / "sub"
     out = tmp_path / "wp.md"
-    work_precision.main(["--quick", "--out", str(out)])
+    work_precision.main(["--quick", "--out", "sub/wp.md"])
     text = out.read_text()
     assert (tmp_path / "wp.png").stat().st_size > 10_000 and (tmp_path / "wp_state.png").stat().st_size > 10_000
     for label in ("penny_env simulate", "penny_env contact_tol sweep", "env step path", "solve_ivp RK45",
@@ -98,10 +99,10 @@ def test_work_precision_quick(tmp_path):
     assert "![work-precision, impact times](wp.png)" in text
 
 
-def test_stability_quick(tmp_path):
+def test_stability_quick(reports_untouched):
     from penny_env.analysis import stability
-    out = tmp_path / "st.md"
-    results = stability.main(["--quick", "--out", str(out)])
+    out = reports_untouched / "st.md"
+    results = stability.main(["--quick", "--out", "st.md"])
     text = out.read_text()
     names = [name for name, _, _ in stability.CASES]
     assert [r[0] for r in results] == names

@@ -128,6 +128,8 @@ def main(argv: list[str] | None = None) -> str:
                                                     "<!-- throughput:end --> in this file (README.md) with the tables")
     args = ap.parse_args(argv)
     quick = args.quick
+    if quick and args.readme:
+        ap.error("--readme writes the README's throughput table: it takes a full run, not --quick")
     repeats = args.repeats if args.repeats is not None else (1 if quick else 3)
     if repeats < 1:
         ap.error(f"--repeats must be >= 1, got {repeats}")
