@@ -139,18 +139,25 @@ def _plot(rows, horizon, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.2))
     for ax, act in zip(axes, UNACTUATED):
         for r in (r for r in rows if r["actuation"] == act and r["horizon"] == horizon):
             plane = r["scene"] == "open plane"  # drawn on top: the line the invariant pins it to
             ax.scatter(r["final"][:, 0], r["final"][:, 1], s=8 if plane else 3, alpha=1.0 if plane else 0.5,
                        label=r["scene"], zorder=3 if plane else 2, color="black" if plane else None)
-        ax.legend(fontsize=7, markerscale=3)
-        ax.plot(START[4], START[5], "r*", ms=12, zorder=4)
+        ax.plot(START[4], START[5], "r*", ms=12, zorder=4, ls="none", label="initial speeds")
         ax.set_xlabel("theta_dot [rad/s]")
         ax.set_ylabel("phi_dot [rad/s]")
-        ax.set_title(f"{act} only ({UNACTUATED[act][1]} unactuated), t = {horizon:g} s; red star: initial", fontsize=9)
-    fig.tight_layout()
+        ax.set_title(f"{act} only ({UNACTUATED[act][1]} unactuated): speeds at t = {horizon:g} s", fontsize=9)
+    handles, labels = axes[0].get_legend_handles_labels()
+    legend = fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8)  # below: it hides no sample
+    for handle in legend.legend_handles:  # legible markers in the legend, whatever their size in the plot
+        if hasattr(handle, "set_sizes"):
+            handle.set_sizes([20.0])
+            handle.set_alpha(1.0)
+        else:
+            handle.set_markersize(9)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -170,6 +170,7 @@ def main(argv=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.colors import BoundaryNorm
 
     params = PennyParams()
     n = 8 if args.quick else 64
@@ -194,11 +195,18 @@ def main(argv=None):
     for ax, act in zip(axes, ("both", "steer", "drive")):
         rs = reachable_set(start, 1.0, table=table, actuation=act, n_samples=samples, seed=1, params=params)
         ax.plot(wall[:, 0], wall[:, 1], color="0.3", lw=1)
-        sc = ax.scatter(rs.final_states[:, 0], rs.final_states[:, 1], c=rs.impact_counts, s=3, cmap="viridis",
-                        vmin=0, vmax=max(1, int(rs.impact_counts.max())))
+        # impact counts are integers: one colour per count, ticks at the counts
+        top = max(1, int(rs.impact_counts.max()))
+        norm = BoundaryNorm(np.arange(-0.5, top + 1.5), plt.get_cmap("viridis").N)
+        order = np.argsort(rs.impact_counts, kind="stable")  # the rarer pennies with more impacts on top
+        sc = ax.scatter(rs.final_states[order, 0], rs.final_states[order, 1], c=rs.impact_counts[order], s=3,
+                        cmap="viridis", norm=norm)
         ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
         ax.set_title(f"{act}: {samples} random bang-bang controls, t = 1 s", fontsize=8)
-        fig.colorbar(sc, ax=ax, shrink=0.7, label="impacts")
+        cb = fig.colorbar(sc, ax=ax, shrink=0.7, label="impacts in the 1 s")
+        cb.set_ticks(np.arange(0, top + 1, max(1, (top + 1) // 8)))
     fig.tight_layout()
     png = out.with_name(out.stem + "_reachable.png")
     fig.savefig(png, dpi=110)

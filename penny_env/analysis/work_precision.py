@@ -104,6 +104,7 @@ def plot(scs, results, path_imp, path_state):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     labels = list(dict.fromkeys(r["method"] for r in results))
     colors = {lab: plt.cm.tab10(i % 10) for i, lab in enumerate(labels)}
@@ -114,7 +115,8 @@ def plot(scs, results, path_imp, path_state):
         nrow = (len(scs) + ncol - 1) // ncol
         fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 4.2 * nrow), squeeze=False)
         for ax, sc in zip(axes.flat, scs):
-            for lab in labels:
+            for i, lab in enumerate(labels):
+                z = 3 + len(labels) - i  # earlier methods on top: penny_env simulate is not hidden by its own sweep
                 rs = [r for r in results if r["scene"] == sc.name and r["method"] == lab and np.isfinite(r["time"])]
                 if not rs:
                     continue
@@ -124,9 +126,10 @@ def plot(scs, results, path_imp, path_state):
                 y = np.where(np.isfinite(y), np.maximum(y, 1e-17), np.nan)
                 good = np.flatnonzero(~bad)
                 order = good[np.argsort(x[good])]  # lines join only the runs without missed/spurious impacts
-                ax.plot(x[order], y[order], "-", color=colors[lab], alpha=0.7, label=lab)
-                ax.scatter(x[~bad], y[~bad], marker=markers[lab], color=colors[lab], s=30)
-                ax.scatter(x[bad], y[bad], marker=markers[lab], facecolors="none", edgecolors=colors[lab], s=60)
+                ax.plot(x[order], y[order], "-", color=colors[lab], alpha=0.7, zorder=z)
+                ax.scatter(x[~bad], y[~bad], marker=markers[lab], color=colors[lab], s=30, zorder=z,
+                           edgecolors="white", linewidths=0.4)
+                ax.scatter(x[bad], y[bad], marker=markers[lab], facecolors="none", edgecolors=colors[lab], s=60, zorder=z)
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_title(sc.name)
@@ -135,10 +138,13 @@ def plot(scs, results, path_imp, path_state):
             ax.grid(True, which="major", alpha=0.3)
         for ax in list(axes.flat)[len(scs):]:
             ax.axis("off")
-        handles, labs = axes.flat[0].get_legend_handles_labels()
-        fig.legend(handles, labs, loc="lower center", ncol=min(6, len(labs)), fontsize=9)
+        # one entry per method with its marker shape and colour (a line joins its settings where none missed)
+        handles = [Line2D([], [], color=colors[lab], marker=markers[lab], markersize=7, label=lab) for lab in labels]
+        handles.append(Line2D([], [], color="0.4", marker="o", markerfacecolor="none", ls="none", markersize=8,
+                              label="hollow: missed or spurious impacts"))
+        fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=9)
         fig.suptitle(f"Work-precision: {ylab} vs run time (hollow, unjoined markers: runs with missed or spurious impacts)")
-        fig.tight_layout(rect=(0, 0.06, 1, 0.96))
+        fig.tight_layout(rect=(0, 0.09, 1, 0.96))
         fig.savefig(path, dpi=110)
         plt.close(fig)
 
@@ -210,6 +216,7 @@ def main(argv=None):
         print(f"{r['scene']:27s} {r['method']:32s} {r['setting']:18s} {1e3 * r['time']:10.2f} ms  "
               f"err {r['err']:.2e}  {m.summary() if m else '-'}  state err {r['serr']:.2e}  {r['status']}")
     if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)  # the PNGs are written first
         base = os.path.splitext(args.out)[0]
         pngs = (base + ".png", base + "_state.png")
         plot(scs, results, *pngs)
