@@ -130,8 +130,8 @@ def main(argv=None):
     lines = header("The paper's figures, reproduced", "penny_env.analysis.paper_figures", argv or sys.argv[1:])
     lines += ["Figures 1-4 of the paper: the first impacts of the penny started at x = y = theta = 0, "
               "phi = pi/2, theta_dot = 10, phi_dot = 0.2. Red segments: the penny at each impact; "
-              "black dots: front-end impacts, orange squares: back-end impacts. The plastic panels enlarge "
-              "the impacts in an inset: the penny comes to rest against the wall after a few of them.", "",
+              "black dots: front-end impacts, orange squares: back-end impacts. In the plastic panels the impacts "
+              "crowd on a few centimetres of the wall; an inset enlarges them.", "",
               f"![scenes]({scenes_png.name})", "",
               "| table | law | impacts | first impact [s] | last impact [s] | energy after / before |",
               "|---|---|---|---|---|---|", *rows, "",
