@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from ..physics import SolverSettings, advance, simulate
-from ..physics.flow import end_kinematics, kinetic_energy
+from ..physics.flow import end_kinematics
 from ..physics.laws import apply_law, make_law
 
 
@@ -355,6 +355,3 @@ def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample
     walls = [_hit_wall(p, e, params, table) for p, e in zip(states, ends)]
     return _finish(times, ends, states, S[:, 0], t, sample, status, k, walls, params)
 
-
-def energy(state, params) -> float:
-    return float(kinetic_energy(np.asarray(state, float)[:, None], params)[0])
