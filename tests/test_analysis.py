@@ -1,6 +1,7 @@
 """Benchmarks and reports (penny_env.analysis): quick modes run end to end, baselines are sane."""
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 
@@ -9,8 +10,10 @@ import pytest
 
 from penny_env.analysis import reference
 
-pytest.importorskip("scipy")
-pytest.importorskip("matplotlib")
+# scipy (solve_ivp, the other integrators) and matplotlib (the plots) are optional extras ([bench], [plot])
+needs_scipy = pytest.mark.skipif(importlib.util.find_spec("scipy") is None, reason="scipy (the penny-env[bench] extra) is not installed")
+needs_matplotlib = pytest.mark.skipif(importlib.util.find_spec("matplotlib") is None,
+                                      reason="matplotlib (the penny-env[plot] extra) is not installed")
 
 
 PAPER = ("circle_elastic", "circle_plastic", "ellipse_elastic", "ellipse_plastic")
@@ -48,7 +51,8 @@ def test_reference_loads_as_float64():
     assert ctrl and ctrl[0].controls.shape[1] == 2 and ctrl[0].control_dt > 0
 
 
-def test_baselines_find_first_impacts_of_paper_elastic_circle():
+@needs_scipy
+def test_integrators_find_first_impacts_of_paper_elastic_circle():
     from penny_env.analysis.integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
     sc = reference.paper_scenes()[0]
     assert sc.name == "circle_elastic"
@@ -69,6 +73,7 @@ def test_baselines_find_first_impacts_of_paper_elastic_circle():
     assert np.min(np.diff(res.impact_times)) > 0.1
 
 
+@needs_scipy
 def test_bench_solvers_quick(reports_untouched):
     from penny_env.analysis import bench_solvers
     out = reports_untouched / "bench.md"
@@ -84,6 +89,8 @@ def test_bench_solvers_quick(reports_untouched):
             assert r["m_ivp"].matched == 20
 
 
+@needs_scipy
+@needs_matplotlib
 def test_work_precision_quick(reports_untouched):
     from penny_env.analysis import work_precision
     tmp_path = reports_untouched / "sub"
@@ -118,3 +125,14 @@ def test_stability_quick(reports_untouched):
             # the small versions of every case keep the invariants: finite, inside, energy as the law says
             assert r["passed"], (name, r["label"], r["reasons"])
             assert r["measured"].get("finite", True) is True, (name, r["label"])
+
+
+def test_progress_bars_are_optional(monkeypatch):
+    """tqdm (and rich, for SB3's bar) are optional extras: without them the commands run without a bar."""
+    from penny_env.analysis import common
+    from training import train
+    monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm raises ImportError
+    items = [1, 2, 3]
+    assert common.progress(items, disable=False) is items
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name in ("tqdm", "rich") else object())
+    assert train._progress_bar_installed() is False

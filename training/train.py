@@ -77,6 +77,12 @@ def evaluate(env_id, policy, episodes, seed, num_envs=16):
             "mean_length": float(np.mean(lengths[:k])), "episodes": k}
 
 
+def _progress_bar_installed() -> bool:
+    """SB3's progress bar needs tqdm and rich (the [train] extra); without them training runs without it."""
+    import importlib.util
+    return all(importlib.util.find_spec(m) is not None for m in ("tqdm", "rich"))
+
+
 def train(cfg, out: Path, quick: bool = False):
     import torch
     from stable_baselines3 import PPO, SAC
@@ -96,7 +102,7 @@ def train(cfg, out: Path, quick: bool = False):
     Algo = PPO if cfg["algo"] == "ppo" else SAC
     model = Algo("MlpPolicy", venv, seed=cfg["seed"], policy_kwargs=cfg["policy_kwargs"], verbose=0, **algo_kwargs)
     t0 = time.perf_counter()
-    model.learn(total_timesteps=total, progress_bar=not quick)
+    model.learn(total_timesteps=total, progress_bar=not quick and _progress_bar_installed())
     seconds = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     model.save(out / "model.zip")

@@ -77,7 +77,7 @@ def progress(iterable, desc: str = "", total=None, disable=None):
         disable = not sys.stderr.isatty()
     try:
         from tqdm import tqdm
-    except ImportError:  # pragma: no cover
+    except ImportError:  # tqdm is in the [train] and [bench] extras: without it, no bar
         return iterable
     return tqdm(iterable, desc=desc, total=total, disable=disable, leave=False)
 

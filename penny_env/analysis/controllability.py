@@ -40,12 +40,12 @@ START = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])  # the paper's initial s
 def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[dict]:
     """One row per (actuation, scene, horizon): the range of the unactuated speed over the sampled
     reachable set, the share of sequences with impacts, and the final speeds."""
+    from .common import progress as progress_bar
     from .dynamics import reachable_set
 
     jobs = [(act, scene, T) for act in UNACTUATED for scene in SCENES for T in horizons]
-    bar = _progress(len(jobs), progress)
     rows = []
-    for act, scene, T in jobs:
+    for act, scene, T in progress_bar(jobs, desc="reachable sets", disable=None if progress else True):
         table, law = SCENES[scene]
         rs = reachable_set(START, T, table=table, law=law, actuation=act, n_samples=samples, seed=seed)
         k, name = UNACTUATED[act]
@@ -54,23 +54,7 @@ def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[
                      "min": float(v.min()), "max": float(v.max()), "min_abs": float(np.abs(v).min()), "spread": float(v.max() - v.min()),
                      "with_impacts": float(np.mean(rs.impact_counts > 0)),
                      "mean_impacts": float(rs.impact_counts.mean()), "final": rs.final_states[:, 4:6].copy()})
-        bar.update(1)
-    bar.close()
     return rows
-
-
-def _progress(total, enabled):
-    try:
-        from tqdm import tqdm
-        return tqdm(total=total, desc="reachable sets", disable=not enabled)
-    except ImportError:  # tqdm is in the [train] and [bench] extras
-        class _Quiet:
-            def update(self, _):
-                pass
-
-            def close(self):
-                pass
-        return _Quiet()
 
 
 def verdicts(rows) -> list[str]:
