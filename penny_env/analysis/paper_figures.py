@@ -42,12 +42,15 @@ def _draw_path(ax, tr, table, params, path, lw=0.8, ms=3):
 def draw_scene(ax, table, law, n_impacts=20, params=pe.PennyParams(), inset=False):
     """One of the paper's figures 1-4 on ax; inset: enlarge the impacts (they crowd where a plastic
     penny comes to rest against the wall)."""
+    from matplotlib.ticker import MaxNLocator
+
     tr = pe.simulate(PAPER_STATE, params=params, table=table, law=law, n_impacts=n_impacts)
     path = tr.states_at(np.linspace(0.0, tr.final_time, 4000))
     _draw_path(ax, tr, table, params, path)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
+    ax.xaxis.set_major_locator(MaxNLocator(5, steps=[1, 2, 5, 10]))  # readable tick labels on the narrow panels
     ax.set_title(f"{law}, {table!r}: {tr.n_impacts} impacts in {tr.final_time:.2f} s", fontsize=9)
     if inset and tr.n_impacts:
         S = np.asarray(tr.impact_states)
@@ -62,6 +65,8 @@ def draw_scene(ax, table, law, n_impacts=20, params=pe.PennyParams(), inset=Fals
         sub.set_ylim(cy - half, cy + half)
         sub.set_aspect("equal")
         sub.tick_params(labelsize=7)
+        sub.xaxis.set_major_locator(MaxNLocator(4, steps=[1, 2, 5, 10]))
+        sub.yaxis.set_major_locator(MaxNLocator(5, steps=[1, 2, 5, 10]))
         sub.set_title(f"enlarged ({2 * half * 100:.1f} cm across)", fontsize=8)
         ax.indicate_inset_zoom(sub, edgecolor="0.4")
     return tr
@@ -91,6 +96,7 @@ def main(argv=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     out = report_path(args.out, args.quick, "paper_figures.md")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -117,6 +123,7 @@ def main(argv=None):
         ax.plot(S[0], S[1], ".", ms=3, color="tab:blue")
         ax.set_aspect("equal")
         ax.set_xlabel("x [m]")
+        ax.xaxis.set_major_locator(MaxNLocator(4, steps=[1, 2, 5, 10]))
         if k == 0:
             ax.set_ylabel("y [m]")
         spread = np.hypot(S[0] - S[0].mean(), S[1] - S[1].mean()).max() * 1e3
