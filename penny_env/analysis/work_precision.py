@@ -110,7 +110,7 @@ def plot(scs, results, path_imp, path_state):
     colors = {lab: plt.cm.tab10(i % 10) for i, lab in enumerate(labels)}
     markers = dict(zip(labels, "os^vDP*Xh"))
     for path, key, ylab in ((path_imp, "err", "max impact-time error [s]"),
-                            (path_state, "serr", "state error at the fixed time (max abs)")):
+                            (path_state, "serr", "max state error at the fixed time [m, rad, rad/s]")):
         ncol = 3
         nrow = (len(scs) + ncol - 1) // ncol
         fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 4.2 * nrow), squeeze=False)
