@@ -53,6 +53,8 @@ def test_checkers_without_warnings(env_id):
     no_pygame = importlib.util.find_spec("pygame") is None
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        # the tests run without a display (SDL_VIDEODRIVER=dummy): human mode says so once, rightly
+        warnings.filterwarnings("ignore", message='render_mode="human": no display')
         check_env(gym.make(env_id, render_mode="rgb_array").unwrapped, skip_render_check=no_pygame)
 
 
