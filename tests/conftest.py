@@ -1,13 +1,68 @@
+"""Shared test helpers, and the optional extras.
+
+The suite passes with skips when an optional extra is missing: a test module that needs one for all
+its tests starts with ``pytest.importorskip(name, reason=...)``, a single test calls it in its body.
+hypothesis (the ``test`` extra) is used by property tests that sit next to plain ones in the same
+modules: without it, ``@given`` tests are skipped with their reason (see _skip_without_hypothesis) and
+the plain tests of those modules still run.
+"""
+import inspect
 import os
+import sys
+import types
 
 import numpy as np
 import pytest
-from hypothesis import settings
-
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-settings.register_profile("ci", deadline=None, max_examples=60, derandomize=True)
-settings.load_profile("ci")
+
+
+def _skip_without_hypothesis():
+    """Install a stand-in ``hypothesis`` module whose ``@given`` marks the test skipped.
+
+    Only when hypothesis is not installed. Strategies and settings become inert placeholders (they are
+    only built, never drawn from, since every test that would draw from them is skipped)."""
+    reason = "hypothesis is not installed (the penny-env[test] extra): property test skipped"
+
+    class _Inert:
+        def __call__(self, *args, **kwargs):
+            if len(args) == 1 and callable(args[0]) and not kwargs:  # used as a decorator
+                return args[0]
+            return self
+
+        def __getattr__(self, name):
+            return self
+
+    def given(*args, **kwargs):
+        def decorate(test):
+            def skipped(*_, **__):
+                pytest.skip(reason)
+            # keep the arguments hypothesis does not draw (fixtures, parametrize) in the signature
+            sig = inspect.signature(test)
+            skipped.__signature__ = sig.replace(parameters=[q for q in sig.parameters.values() if q.name not in kwargs])
+            skipped.__name__, skipped.__qualname__ = test.__name__, test.__qualname__
+            skipped.__module__, skipped.__doc__ = test.__module__, test.__doc__
+            skipped.pytestmark = [pytest.mark.skip(reason=reason)]
+            return skipped
+        return decorate
+
+    inert = _Inert()
+    stub = types.ModuleType("hypothesis")
+    stub.given, stub.settings, stub.assume, stub.example, stub.note = given, inert, inert, inert, inert
+    stub.HealthCheck = inert
+    strategies = types.ModuleType("hypothesis.strategies")
+    strategies.__getattr__ = lambda name: inert
+    stub.strategies = strategies
+    sys.modules["hypothesis"], sys.modules["hypothesis.strategies"] = stub, strategies
+
+
+try:
+    from hypothesis import settings
+except ImportError:
+    _skip_without_hypothesis()
+else:
+    settings.register_profile("ci", deadline=None, max_examples=60, derandomize=True)
+    settings.load_profile("ci")
 
 PAPER_STATE = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
 
@@ -31,3 +86,35 @@ def random_inside_state(rng, params, table, speed=10.0, spin=2.0, margin=0.0):
 @pytest.fixture
 def paper_state():
     return PAPER_STATE.copy()
+
+
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _reports_snapshot():
+    """Modification times of docs/* and README.md, and their `git status` where git is there."""
+    import shutil
+    import subprocess
+    paths = [os.path.join(REPO, "README.md")]
+    docs = os.path.join(REPO, "docs")
+    if os.path.isdir(docs):
+        paths += [os.path.join(docs, f) for f in sorted(os.listdir(docs))]
+    snap = {p: os.stat(p).st_mtime_ns for p in paths if os.path.exists(p)}
+    if shutil.which("git") and os.path.exists(os.path.join(REPO, ".git")):
+        run = subprocess.run(["git", "status", "--porcelain", "--", "docs", "README.md"], cwd=REPO,
+                             capture_output=True, text=True)
+        snap["git status"] = run.stdout
+    return snap
+
+
+@pytest.fixture
+def reports_untouched(tmp_path, monkeypatch):
+    """Runs the test from an empty temporary working directory, then checks that the committed reports
+    (docs/, README.md) are as they were and that nothing landed in ./docs: report commands write only
+    where --out says (a --quick run without --out: a temporary directory)."""
+    before = _reports_snapshot()
+    monkeypatch.chdir(tmp_path)
+    yield tmp_path
+    assert _reports_snapshot() == before
+    assert not os.path.exists(os.path.join(tmp_path, "docs")), "a report without --out landed in ./docs"

@@ -1,6 +1,7 @@
 """Benchmarks and reports (penny_env.analysis): quick modes run end to end, baselines are sane."""
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 
@@ -9,12 +10,11 @@ import pytest
 
 from penny_env.analysis import reference
 
-pytest.importorskip("scipy")
-pytest.importorskip("matplotlib")
+# scipy (solve_ivp, the other integrators) and matplotlib (the plots) are optional extras ([bench], [plot])
+needs_scipy = pytest.mark.skipif(importlib.util.find_spec("scipy") is None, reason="scipy (the penny-env[bench] extra) is not installed")
+needs_matplotlib = pytest.mark.skipif(importlib.util.find_spec("matplotlib") is None,
+                                      reason="matplotlib (the penny-env[plot] extra) is not installed")
 
-needs_reference = pytest.mark.skipif(
-    not (reference.data_dir() / "paper_scenes.json").exists() or not (reference.data_dir() / "extra_scenes.json").exists(),
-    reason="reference data not generated (tests/reference/make_reference.py)")
 
 PAPER = ("circle_elastic", "circle_plastic", "ellipse_elastic", "ellipse_plastic")
 
@@ -40,7 +40,6 @@ def test_matching_counts_missed_and_spurious():
     assert (m.matched, m.missed, m.spurious) == (0, 1, 1)
 
 
-@needs_reference
 def test_reference_loads_as_float64():
     scenes = reference.paper_scenes()
     assert [s.name for s in scenes] == list(PAPER)
@@ -52,9 +51,9 @@ def test_reference_loads_as_float64():
     assert ctrl and ctrl[0].controls.shape[1] == 2 and ctrl[0].control_dt > 0
 
 
-@needs_reference
-def test_baselines_find_first_impacts_of_paper_elastic_circle():
-    from penny_env.analysis.baselines import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
+@needs_scipy
+def test_integrators_find_first_impacts_of_paper_elastic_circle():
+    from penny_env.analysis.integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
     sc = reference.paper_scenes()[0]
     assert sc.name == "circle_elastic"
     kw = dict(params=sc.params, table=sc.table, law=sc.law, n_impacts=4, t_stop=20.0)
@@ -74,11 +73,11 @@ def test_baselines_find_first_impacts_of_paper_elastic_circle():
     assert np.min(np.diff(res.impact_times)) > 0.1
 
 
-@needs_reference
-def test_bench_solvers_quick(tmp_path):
+@needs_scipy
+def test_bench_solvers_quick(reports_untouched):
     from penny_env.analysis import bench_solvers
-    out = tmp_path / "bench.md"
-    rows = bench_solvers.main(["--quick", "--out", str(out)])
+    out = reports_untouched / "bench.md"
+    rows = bench_solvers.main(["--quick", "--out", "bench.md"])
     text = out.read_text()
     for name in PAPER:
         assert f"| {name} |" in text
@@ -90,11 +89,13 @@ def test_bench_solvers_quick(tmp_path):
             assert r["m_ivp"].matched == 20
 
 
-@needs_reference
-def test_work_precision_quick(tmp_path):
+@needs_scipy
+@needs_matplotlib
+def test_work_precision_quick(reports_untouched):
     from penny_env.analysis import work_precision
+    tmp_path = reports_untouched / "sub"
     out = tmp_path / "wp.md"
-    work_precision.main(["--quick", "--out", str(out)])
+    work_precision.main(["--quick", "--out", "sub/wp.md"])
     text = out.read_text()
     assert (tmp_path / "wp.png").stat().st_size > 10_000 and (tmp_path / "wp_state.png").stat().st_size > 10_000
     for label in ("penny_env simulate", "penny_env contact_tol sweep", "env step path", "solve_ivp RK45",
@@ -105,11 +106,10 @@ def test_work_precision_quick(tmp_path):
     assert "![work-precision, impact times](wp.png)" in text
 
 
-@needs_reference
-def test_stability_quick(tmp_path):
+def test_stability_quick(reports_untouched):
     from penny_env.analysis import stability
-    out = tmp_path / "st.md"
-    results = stability.main(["--quick", "--out", str(out)])
+    out = reports_untouched / "st.md"
+    results = stability.main(["--quick", "--out", "st.md"])
     text = out.read_text()
     names = [name for name, _, _ in stability.CASES]
     assert [r[0] for r in results] == names
@@ -125,3 +125,14 @@ def test_stability_quick(tmp_path):
             # the small versions of every case keep the invariants: finite, inside, energy as the law says
             assert r["passed"], (name, r["label"], r["reasons"])
             assert r["measured"].get("finite", True) is True, (name, r["label"])
+
+
+def test_progress_bars_are_optional(monkeypatch):
+    """tqdm (and rich, for SB3's bar) are optional extras: without them the commands run without a bar."""
+    from penny_env.analysis import common
+    from training import train
+    monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm raises ImportError
+    items = [1, 2, 3]
+    assert common.progress(items, disable=False) is items
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name in ("tqdm", "rich") else object())
+    assert train._progress_bar_installed() is False

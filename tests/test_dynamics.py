@@ -64,20 +64,22 @@ def test_lyapunov_exponents_separate_integrable_from_chaotic():
         lyapunov_exponents(np.zeros((3, 5)), 1.0, table=None)
 
 
-def test_dynamics_report_quick(tmp_path):
+def test_dynamics_report_quick(reports_untouched):
     pytest.importorskip("matplotlib")
     from penny_env.analysis import dynamics
+    tmp_path = reports_untouched
     out = tmp_path / "dynamics.md"
-    dynamics.main(["--quick", "--out", str(out)])
+    dynamics.main(["--quick", "--out", "dynamics.md"])
     text = out.read_text()
     assert "| circle r = 0.2 |" in text and (tmp_path / "dynamics_reachable.png").exists()
 
 
-def test_controllability_study_quick(tmp_path):
+def test_controllability_study_quick(reports_untouched):
     pytest.importorskip("matplotlib")
-    from training import controllability
+    from penny_env.analysis import controllability
+    tmp_path = reports_untouched
     out = tmp_path / "controllability.md"
-    rows = controllability.main(["--quick", "--out", str(out)])
+    rows = controllability.main(["--quick", "--out", "controllability.md"])
     plane = [r for r in rows if r["scene"] == "open plane"]
     assert plane and all(r["spread"] == 0.0 for r in plane)
     assert any(r["spread"] > 0 for r in rows if r["scene"] != "open plane")

@@ -39,7 +39,7 @@ def test_frame_shows_penny_front_target_and_table(scene):
     far[max(br - 25, 0):br + 25, max(bc - 25, 0):bc + 25] = False
     assert not ((frame == rd.FRONT).all(axis=2) & far).any()
     if scene != "plane":
-        assert (frame[0, 0] == rd.OUTSIDE).all()
+        assert (frame[-1, 0] == rd.OUTSIDE).all()  # (the text line covers the top left)
         cr, cc = _px(env, -0.02, -0.06)
         assert (frame[cr, cc] == rd.INSIDE).all()
         # the wall crosses the positive x axis at the table's extent
@@ -73,6 +73,7 @@ def test_impacts_arc_is_drawn():
 
 
 def test_human_mode_and_render_without_mode():
+    pytest.importorskip("pygame", reason="pygame-ce (the penny-env[render] extra) is not installed")
     env = PennyEnv("circle", "reach", render_mode="human")
     env.reset(seed=0)
     env.step(np.zeros(2, np.float32))
@@ -100,3 +101,90 @@ def test_vector_render():
     venv.step(np.zeros((2, 2), np.float32))
     frames = venv.render()
     assert len(frames) == 2 and frames[0].dtype == np.uint8
+
+
+def _first_impact(env_id, seed=1, max_steps=400):
+    """An env (rgb_array) stepped with random actions until a step with an impact."""
+    env = gym.make(env_id, render_mode="rgb_array")
+    env.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    for _ in range(max_steps):
+        _, _, term, trunc, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+        if info["impacts"]:
+            return env, info
+        assert not (term or trunc)
+    raise AssertionError("no impact")
+
+
+def test_impacts_flash_at_the_impact_point_and_fade():
+    env, info = _first_impact("PennyImpacts-Stadium-v0")
+    u = env.unwrapped
+    hud = u._hud
+    t_imp, end, st = hud["impacts"][-1]
+    assert hud["impact_count"] >= 1 and hud["time"] == pytest.approx(info["time"])
+    assert hud["time"] - u.scene.control_dt <= t_imp <= hud["time"]
+    R = u._core.R
+    px, py = st[0] + end * R * math.cos(st[3]), st[1] + end * R * math.sin(st[3])
+    frame = env.render()
+    renderer = u._renderer
+    plain = renderer.frame(u._s, u._target, list(u._trail), u._arc, dict(hud, impacts=()))
+    # the ring (radius >= 4 px around the impact point) is drawn in the flash colour where the plain frame has none
+    r, c = renderer.to_pixel(px, py)
+    ring = np.zeros(frame.shape[:2], bool)
+    rr, cc = np.mgrid[: frame.shape[0], : frame.shape[1]]
+    d = np.hypot(rr + 0.5 - (r + 0.5), cc + 0.5 - (c + 0.5))
+    ring[(d > 3) & (d < 9)] = True
+    changed = (frame != plain).any(axis=2)
+    assert changed[ring].sum() >= 10 and not changed[d > 20].any()
+    yellowish = (frame[..., 0] > 200) & (frame[..., 1] > 150) & (frame[..., 2] < 120)
+    assert (yellowish & ring).sum() >= 10
+    # faded out after FLASH_INTERVALS control intervals without impacts (or drawn again for a new impact)
+    for _ in range(rd.FLASH_INTERVALS + 1):
+        _, _, _, _, info = env.step(np.zeros(env.action_space.shape, np.float32))
+    recent = [i for i in hud["impacts"] if hud["time"] - i[0] < rd.FLASH_INTERVALS * u.scene.control_dt]
+    if not recent:
+        later = env.render()
+        plain = renderer.frame(u._s, u._target, list(u._trail), u._arc, dict(hud, impacts=()))
+        assert np.array_equal(later, plain)
+
+
+def test_text_line_shows_time_reward_and_impacts():
+    env = PennyEnv("stadium", "impacts", render_mode="rgb_array")
+    env.reset(seed=0)
+    u = env.unwrapped
+    env.render()
+    r = u._renderer
+    args = (u._s, u._target, list(u._trail), u._arc)
+    bare = r.frame(*args)
+    a = r.frame(*args, {"time": 1.25, "reward": -0.5, "impact_count": 3})
+    b = r.frame(*args, {"time": 2.5, "reward": -0.5, "impact_count": 3})
+    assert rd.hud_text({"time": 1.25, "reward": -0.5, "impact_count": 3}) == "T 1.25 S   REWARD -0.500   IMPACTS 3"
+    top = (slice(0, 7 * rd.TEXT_SCALE), slice(0, r.W))
+    white = (a[top] == rd.TEXT).all(axis=2)
+    assert white.sum() > 100 and not (bare[top] == rd.TEXT).all(axis=2).any()
+    assert not np.array_equal(a[top], b[top])  # the time is drawn
+    assert np.array_equal(a[7 * rd.TEXT_SCALE:], bare[7 * rd.TEXT_SCALE:])  # the text stays in its line
+    # every character the line can hold has a glyph
+    for hud in ({"time": 1234.5, "reward": -1e-3, "impact_count": 0}, {"time": 0.0, "reward": float("nan")}):
+        assert set(rd.hud_text(hud)) <= set(rd._GLYPHS), rd.hud_text(hud)
+    # the env's own frames carry the line after a step
+    env.step(np.zeros(2, np.float32))
+    assert (env.render()[top] == rd.TEXT).all(axis=2).sum() > 100
+
+
+def test_human_mode_opens_the_display_only_and_warns_once_without_one(monkeypatch):
+    pygame = pytest.importorskip("pygame", reason="pygame-ce (the penny-env[render] extra) is not installed")
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.setattr(rd, "_warned_no_display", False)
+    env = PennyEnv("circle", "reach", render_mode="human")
+    with pytest.warns(UserWarning, match="no display"):
+        env.reset(seed=0)
+    assert pygame.display.get_init() and not pygame.mixer.get_init()
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env.step(np.zeros(2, np.float32))  # warned once, not at every frame
+        other = PennyEnv("circle", "reach", render_mode="human")
+        other.reset(seed=0)
+        other.close()
+    env.close()

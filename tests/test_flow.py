@@ -1,8 +1,9 @@
 """Exact flow: against mpmath quadrature at 30 digits, near the cancellation points and at the
 extremes, plus the semigroup property and the constraints (hypothesis)."""
-import mpmath as mp
 import numpy as np
 import pytest
+
+mp = pytest.importorskip("mpmath", reason="mpmath (the penny-env[test] extra) is the reference of these tests")
 from hypothesis import given, strategies as st
 
 from penny_env.physics.flows import RULE_LIMITS, flow

@@ -14,7 +14,7 @@ import pytest
 
 import penny_env as pe
 
-DATA = Path(__file__).parent / "reference" / "data"
+DATA = Path(__file__).parent.parent / "penny_env" / "analysis" / "reference_data"
 WELL_CONDITIONED = 1e-5  # relative normal speed at impact
 POSITION_ROUNDOFF = 64 * 2.2e-16 * 0.2  # metres: a few ulps of the table's size
 

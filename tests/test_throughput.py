@@ -2,9 +2,9 @@
 from penny_env.analysis import throughput
 
 
-def test_throughput_quick(tmp_path):
-    out = tmp_path / "throughput.md"
-    report = throughput.main(["--quick", "--out", str(out)])
+def test_throughput_quick(reports_untouched):
+    out = reports_untouched / "reports" / "throughput.md"  # --out relative to the working directory
+    report = throughput.main(["--quick", "--out", "reports/throughput.md"])
     text = out.read_text()
     assert text == report
     for needle in ("Pendulum-v1", "CartPole-v1", "PennyImpacts-Stadium-v0", "SyncVectorEnv", "| 256 |", "command:", "date:",

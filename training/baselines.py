@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -16,11 +15,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=64)
     ap.add_argument("--quick", action="store_true", help="4 episodes on two ids (for tests)")
-    ap.add_argument("--out", default="docs/baselines.md")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report (default: docs/baselines.md under the working directory; "
+                    "--quick: a new temporary directory)")
     args = ap.parse_args(argv)
     import gymnasium as gym
     import penny_env  # noqa: F401
-    from penny_env.analysis.common import header
+    from penny_env.analysis.common import header, report_path
     from training.train import evaluate
 
     ids = sorted(k for k in gym.registry if k.startswith("Penny"))
@@ -42,9 +43,11 @@ def main(argv=None):
     lines += [f"{episodes} episodes per policy and id, seeds from 123.", "",
               "| id | zero: success | zero: return | random: success | random: return |",
               "|---|---|---|---|---|", *rows, ""]
-    out = Path(args.out)
+    out = report_path(args.out, args.quick, "baselines.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines))
+    print(f"wrote {out}")
+    return out
 
 
 if __name__ == "__main__":

@@ -5,12 +5,14 @@ zero actions on fresh seeds.
 
 The config (YAML) names env_id, algo (ppo or sac), num_envs, total_timesteps, seed,
 eval_episodes, algo_kwargs and policy_kwargs; --set key=value overrides a top-level field.
-The run writes model.zip, results.json and results.md to --out (default runs/<config name>).
+The run writes model.zip, results.json and results.md to --out (default runs/<config name>;
+--quick without --out: a new temporary directory).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 import time
 from pathlib import Path
 
@@ -75,6 +77,12 @@ def evaluate(env_id, policy, episodes, seed, num_envs=16):
             "mean_length": float(np.mean(lengths[:k])), "episodes": k}
 
 
+def _progress_bar_installed() -> bool:
+    """SB3's progress bar needs tqdm and rich (the [train] extra); without them training runs without it."""
+    import importlib.util
+    return all(importlib.util.find_spec(m) is not None for m in ("tqdm", "rich"))
+
+
 def train(cfg, out: Path, quick: bool = False):
     import torch
     from stable_baselines3 import PPO, SAC
@@ -94,7 +102,7 @@ def train(cfg, out: Path, quick: bool = False):
     Algo = PPO if cfg["algo"] == "ppo" else SAC
     model = Algo("MlpPolicy", venv, seed=cfg["seed"], policy_kwargs=cfg["policy_kwargs"], verbose=0, **algo_kwargs)
     t0 = time.perf_counter()
-    model.learn(total_timesteps=total, progress_bar=not quick)
+    model.learn(total_timesteps=total, progress_bar=not quick and _progress_bar_installed())
     seconds = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     model.save(out / "model.zip")
@@ -125,12 +133,18 @@ def train(cfg, out: Path, quick: bool = False):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--config", required=True, help="training config (YAML), e.g. configs/train/ppo_reach_ellipse.yaml")
-    ap.add_argument("--out", default=None, help="output folder (default runs/<config name>)")
+    ap.add_argument("--out", default=None, help="output folder (default: runs/<config name> under the working "
+                                                "directory; --quick: a new temporary directory)")
     ap.add_argument("--quick", action="store_true", help="a few thousand steps: checks the pipeline, learns nothing")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config field")
     args = ap.parse_args(argv)
     cfg = load_config(args.config, args.set)
-    out = Path(args.out) if args.out else Path("runs") / Path(args.config).stem
+    if args.out:
+        out = Path(args.out).resolve()
+    elif args.quick:  # a quick run checks the pipeline: it never writes over a real run
+        out = Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / Path(args.config).stem
+    else:
+        out = (Path("runs") / Path(args.config).stem).resolve()
     return train(cfg, out, quick=args.quick)
 
 

@@ -5,7 +5,7 @@
 On the paper's four scenes (circle a=b=0.2 / ellipse a=0.15, b=0.2; elastic / plastic; x=y=theta=0,
 phi=pi/2, theta_dot=10, phi_dot=0.2) both methods compute the first 20 impacts in the same run.
 Reported: best-of-repeats wall time (time.perf_counter), their ratio, and the impact-time errors
-against the 50-digit reference (tests/reference/data/paper_scenes.json): max abs error over the
+against the 50-digit reference (penny_env/analysis/reference_data/paper_scenes.json): max abs error over the
 impacts both found, and found / missed / spurious impacts (matched by time and end, see
 penny_env.analysis.matching). Target: >= 10x faster with >= 100x smaller impact-time error.
 """
@@ -17,7 +17,7 @@ import sys
 import numpy as np
 
 from . import common
-from .baselines import run_simulate, solve_ivp_hybrid
+from .integrators import run_simulate, solve_ivp_hybrid
 from .matching import match_impacts, unresolvable_mask
 from .reference import paper_scenes
 
@@ -94,7 +94,7 @@ def report(rows, argv) -> list[str]:
           "rtol 1e-12, atol 1e-15 x (L, L, 1, 1, 1, 1) with L the table size, terminal events h(end) = 0 (direction +1) "
           "for both ends, and penny_env's impact law at each event (only the integration differs). "
           "Times are the best of several repeats (time.perf_counter). Errors are against the 50-digit mpmath reference "
-          "(tests/reference/data/paper_scenes.json); impacts are matched by time and end (order-preserving); "
+          "(penny_env/analysis/reference_data/paper_scenes.json); impacts are matched by time and end (order-preserving); "
           "'err' is the max |t - t_ref| over the reference impacts that both methods found (the error ratio is "
           "solve_ivp err / penny_env err on that common set); 'penny_env err, all its matches' is over every impact "
           "penny_env matched (it includes the grazing impacts that solve_ivp misses). 'float64 floor' is the change of the reference impact "

@@ -7,7 +7,9 @@ import os
 import platform
 import shlex
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -23,11 +25,18 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def _version(module: str) -> str:
+    try:
+        from importlib.metadata import version
+        return version(module)
+    except Exception:  # not installed
+        return "not installed"
+
+
 def machine_lines() -> list[str]:
-    import scipy
     return [
         f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
-        f"- Python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}",
+        f"- Python {platform.python_version()}, numpy {np.__version__}, scipy {_version('scipy')}",
         f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
     ]
 
@@ -68,7 +77,7 @@ def progress(iterable, desc: str = "", total=None, disable=None):
         disable = not sys.stderr.isatty()
     try:
         from tqdm import tqdm
-    except ImportError:  # pragma: no cover
+    except ImportError:  # tqdm is in the [train] and [bench] extras: without it, no bar
         return iterable
     return tqdm(iterable, desc=desc, total=total, disable=disable, leave=False)
 
@@ -96,6 +105,20 @@ def table(headers: list[str], rows: list[list]) -> list[str]:
     for r in rows:
         out.append("| " + " | ".join(str(c) for c in r) + " |")
     return out
+
+
+def report_path(out: str | None, quick: bool, name: str) -> Path:
+    """Where a report command writes its Markdown file (its PNGs go next to it).
+
+    ``--out`` when given (a path relative to the working directory, as any command-line path). Without
+    it a ``--quick`` run writes into a new temporary directory, so that quick runs never overwrite the
+    committed reports; a full run writes ``docs/<name>`` under the working directory (the repository
+    root regenerates the committed report)."""
+    if out is not None:
+        return Path(out).resolve()
+    if quick:
+        return Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / name
+    return (Path("docs") / name).resolve()
 
 
 def write(path: str, lines: list[str]) -> None:

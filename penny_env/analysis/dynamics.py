@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -159,16 +158,19 @@ TABLES = {"circle r = 0.2": {"kind": "circle", "r": 0.2}, "ellipse 0.15 x 0.2 (p
 
 
 def main(argv=None):
-    from .common import header
+    from .common import header, report_path
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="few pennies, short times (for tests)")
-    ap.add_argument("--out", default="docs/dynamics.md")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report, PNGs next to it (default: docs/dynamics.md under the working "
+                    "directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.colors import BoundaryNorm
 
     params = PennyParams()
     n = 8 if args.quick else 64
@@ -183,7 +185,7 @@ def main(argv=None):
         rows.append(f"| {name} | {n} | {t_final:g} | {e.size} | {q[0]:.3f} | {q[1]:.3f} | {q[2]:.3f} |")
         print(rows[-1], flush=True)
 
-    out = Path(args.out)
+    out = report_path(args.out, args.quick, "dynamics.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     start = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
     table = TABLES["ellipse 0.15 x 0.2 (paper)"]
@@ -193,11 +195,18 @@ def main(argv=None):
     for ax, act in zip(axes, ("both", "steer", "drive")):
         rs = reachable_set(start, 1.0, table=table, actuation=act, n_samples=samples, seed=1, params=params)
         ax.plot(wall[:, 0], wall[:, 1], color="0.3", lw=1)
-        sc = ax.scatter(rs.final_states[:, 0], rs.final_states[:, 1], c=rs.impact_counts, s=3, cmap="viridis",
-                        vmin=0, vmax=max(1, int(rs.impact_counts.max())))
+        # impact counts are integers: one colour per count, ticks at the counts
+        top = max(1, int(rs.impact_counts.max()))
+        norm = BoundaryNorm(np.arange(-0.5, top + 1.5), plt.get_cmap("viridis").N)
+        order = np.argsort(rs.impact_counts, kind="stable")  # the rarer pennies with more impacts on top
+        sc = ax.scatter(rs.final_states[order, 0], rs.final_states[order, 1], c=rs.impact_counts[order], s=3,
+                        cmap="viridis", norm=norm)
         ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
         ax.set_title(f"{act}: {samples} random bang-bang controls, t = 1 s", fontsize=8)
-        fig.colorbar(sc, ax=ax, shrink=0.7, label="impacts")
+        cb = fig.colorbar(sc, ax=ax, shrink=0.7, label="impacts in the 1 s")
+        cb.set_ticks(np.arange(0, top + 1, max(1, (top + 1) // 8)))
     fig.tight_layout()
     png = out.with_name(out.stem + "_reachable.png")
     fig.savefig(png, dpi=110)
@@ -218,6 +227,8 @@ def main(argv=None):
               "of impacts.", "", f"![reachable sets]({png.name})", ""]
     out.write_text("\n".join(lines))
     print("\n".join(lines))
+    print(f"wrote {out} and {png}")
+    return out
 
 
 if __name__ == "__main__":

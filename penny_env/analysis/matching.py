@@ -110,12 +110,6 @@ def state_error(s, s_ref) -> float:
     return float(np.max(np.abs(np.asarray(s, float) - np.asarray(s_ref, float))))
 
 
-def position_error(s, s_ref) -> float:
-    if s is None:
-        return float("nan")
-    return float(np.hypot(s[0] - s_ref[0], s[1] - s_ref[1]))
-
-
 def unresolvable_mask(sc) -> np.ndarray:
     """Reference impacts of a scene whose wall excursion is within penny_env's contact tolerance."""
     from ..physics import SolverSettings

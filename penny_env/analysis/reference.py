@@ -1,14 +1,15 @@
-"""The mpmath reference data (tests/reference/data/*.json) as float64 numpy structures.
+"""The mpmath reference data (penny_env/analysis/reference_data/*.json) as float64 numpy structures.
 
-The files are written by tests/reference/make_reference.py (50-digit mpmath, independent of the
-simulator); numbers are decimal strings. This module only reads them:
+The files ship with the package (package data) and are written by tests/reference/make_reference.py
+(50-digit mpmath, independent of the simulator); numbers are decimal strings. This module only reads them:
 
 * :func:`paper_scenes` / :func:`extra_scenes` -> list of :class:`Scene` (params, table object, law,
   initial state, impact times / ends / post-impact states, the state at a fixed time, controls);
-* :func:`flow_cases` -> list of :class:`FlowCase` (open-plane flows with constant controls);
-* :func:`impact_map_cases` -> list of :class:`ImpactMapCase` (single impacts, three laws).
+* :func:`flow_cases` -> list of :class:`FlowCase` (open-plane flows with constant controls).
 
-The data directory is ``tests/reference/data`` of the source tree, or ``$PENNY_REFERENCE_DIR``.
+impact_map_cases.json (single impacts, three laws) is read by tests/test_reference.py directly.
+
+The data directory is ``reference_data`` next to this module, or ``$PENNY_REFERENCE_DIR``.
 """
 from __future__ import annotations
 
@@ -22,15 +23,12 @@ import numpy as np
 from ..physics import Circle, Ellipse, PennyParams, Stadium
 from ..physics.laws import ImpactLaw, make_law
 
-STATE_ORDER = ("x", "y", "theta", "phi", "theta_dot", "phi_dot")
-
-
 def data_dir() -> Path:
     """Directory of the reference JSON files."""
     env = os.environ.get("PENNY_REFERENCE_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[2] / "tests" / "reference" / "data"
+    return Path(__file__).resolve().parent / "reference_data"
 
 
 def _f(x) -> float:
@@ -91,10 +89,6 @@ class Scene:
     def n_impacts(self) -> int:
         return int(self.impact_times.shape[0])
 
-    @property
-    def law_label(self) -> str:
-        return str(self.law)
-
 
 def _scene(d: dict) -> Scene:
     final_key = next(k for k in d if k.startswith("state_at_"))
@@ -153,29 +147,6 @@ class FlowCase:
 def flow_cases() -> list[FlowCase]:
     return [FlowCase(d["tag"], make_params(d["params"]), _arr(d["state0"]), float(d["u1"]), float(d["u2"]),
                      float(d["t"]), _arr(d["state_t"])) for d in load_json("flow_cases.json")["cases"]]
-
-
-@dataclass
-class ImpactMapCase:
-    case: int
-    params: PennyParams
-    table: object
-    end: int
-    pre_state: np.ndarray
-    post: dict  # law name -> (6,) post state ("elastic", "plastic", "restitution")
-    restitution_e: float
-    plastic_end_still_moving_outward: bool
-
-
-def impact_map_cases() -> list[ImpactMapCase]:
-    out = []
-    for d in load_json("impact_map_cases.json")["cases"]:
-        out.append(ImpactMapCase(d["case"], make_params(d["params"]), make_table(d["table"]), int(d["end"]),
-                                 _arr(d["pre_state"]),
-                                 {"elastic": _arr(d["post_elastic"]), "plastic": _arr(d["post_plastic"]),
-                                  "restitution": _arr(d["post_restitution"])},
-                                 float(d["restitution_e"]), bool(d["plastic_end_still_moving_outward"])))
-    return out
 
 
 def wall_excursions(sc: Scene, window: float = 1e-2) -> np.ndarray:

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from . import common
-from .baselines import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
+from .integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
 from .matching import match_impacts, state_error, unresolvable_mask
 from .reference import extra_scenes, paper_scenes
 from ..physics import SolverSettings
@@ -104,17 +104,19 @@ def plot(scs, results, path_imp, path_state):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     labels = list(dict.fromkeys(r["method"] for r in results))
     colors = {lab: plt.cm.tab10(i % 10) for i, lab in enumerate(labels)}
     markers = dict(zip(labels, "os^vDP*Xh"))
     for path, key, ylab in ((path_imp, "err", "max impact-time error [s]"),
-                            (path_state, "serr", "state error at the fixed time (max abs)")):
+                            (path_state, "serr", "max state error at the fixed time [m, rad, rad/s]")):
         ncol = 3
         nrow = (len(scs) + ncol - 1) // ncol
         fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 4.2 * nrow), squeeze=False)
         for ax, sc in zip(axes.flat, scs):
-            for lab in labels:
+            for i, lab in enumerate(labels):
+                z = 3 + len(labels) - i  # earlier methods on top: penny_env simulate is not hidden by its own sweep
                 rs = [r for r in results if r["scene"] == sc.name and r["method"] == lab and np.isfinite(r["time"])]
                 if not rs:
                     continue
@@ -124,9 +126,10 @@ def plot(scs, results, path_imp, path_state):
                 y = np.where(np.isfinite(y), np.maximum(y, 1e-17), np.nan)
                 good = np.flatnonzero(~bad)
                 order = good[np.argsort(x[good])]  # lines join only the runs without missed/spurious impacts
-                ax.plot(x[order], y[order], "-", color=colors[lab], alpha=0.7, label=lab)
-                ax.scatter(x[~bad], y[~bad], marker=markers[lab], color=colors[lab], s=30)
-                ax.scatter(x[bad], y[bad], marker=markers[lab], facecolors="none", edgecolors=colors[lab], s=60)
+                ax.plot(x[order], y[order], "-", color=colors[lab], alpha=0.7, zorder=z)
+                ax.scatter(x[~bad], y[~bad], marker=markers[lab], color=colors[lab], s=30, zorder=z,
+                           edgecolors="white", linewidths=0.4)
+                ax.scatter(x[bad], y[bad], marker=markers[lab], facecolors="none", edgecolors=colors[lab], s=60, zorder=z)
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_title(sc.name)
@@ -135,23 +138,26 @@ def plot(scs, results, path_imp, path_state):
             ax.grid(True, which="major", alpha=0.3)
         for ax in list(axes.flat)[len(scs):]:
             ax.axis("off")
-        handles, labs = axes.flat[0].get_legend_handles_labels()
-        fig.legend(handles, labs, loc="lower center", ncol=min(6, len(labs)), fontsize=9)
+        # one entry per method with its marker shape and colour (a line joins its settings where none missed)
+        handles = [Line2D([], [], color=colors[lab], marker=markers[lab], markersize=7, label=lab) for lab in labels]
+        handles.append(Line2D([], [], color="0.4", marker="o", markerfacecolor="none", ls="none", markersize=8,
+                              label="hollow: missed or spurious impacts"))
+        fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=9)
         fig.suptitle(f"Work-precision: {ylab} vs run time (hollow, unjoined markers: runs with missed or spurious impacts)")
-        fig.tight_layout(rect=(0, 0.06, 1, 0.96))
+        fig.tight_layout(rect=(0, 0.09, 1, 0.96))
         fig.savefig(path, dpi=110)
         plt.close(fig)
 
 
 def report(scs, results, argv, png_names) -> list[str]:
     L = common.header("Work-precision of penny_env and baseline integrators", "penny_env.analysis.work_precision", argv)
-    L += ["Errors are against the 50-digit mpmath reference (tests/reference/data). Impact-time error: max |t - t_ref| "
+    L += ["Errors are against the 50-digit mpmath reference (penny_env/analysis/reference_data). Impact-time error: max |t - t_ref| "
           "over the impacts matched by time and end (order-preserving alignment, penny_env.analysis.matching); "
           "missed / spurious impacts are counted separately (a method that misses a grazing impact and loses the "
           "trajectory shows a small error on the few impacts it still matches but many missed ones). "
           "State error: max abs difference of (x, y, theta, phi, theta_dot, phi_dot) at the scene's fixed time "
           "(5 s for the paper's scenes, 3 s stadium, 2 s controlled). Wall time: one run, or the best of several "
-          "when a run is short. All baselines apply penny_env's impact law at their events. Missed impacts in "
+          "when a run is short. All other integrators apply penny_env's impact law at their events. Missed impacts in "
           "brackets are below float64 resolution (the end would pass the wall by less than contact_tol x table size "
           "without the impact; see bench_solvers.md); hollow markers in the plots: missed resolvable or spurious "
           "impacts. Note that after a missed impact a method follows a different trajectory, so its error on the "
@@ -198,7 +204,7 @@ def report(scs, results, argv, png_names) -> list[str]:
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description="work-precision report of penny_env and baselines")
+    ap = argparse.ArgumentParser(description="work-precision report of penny_env and other integrators")
     ap.add_argument("--quick", action="store_true", help="fewer settings, shorter budgets")
     ap.add_argument("--out", default=None, help="Markdown report (e.g. docs/work_precision.md); PNGs go next to it")
     ap.add_argument("--all-scenes", action="store_true", help="also the restitution scene")
@@ -210,6 +216,7 @@ def main(argv=None):
         print(f"{r['scene']:27s} {r['method']:32s} {r['setting']:18s} {1e3 * r['time']:10.2f} ms  "
               f"err {r['err']:.2e}  {m.summary() if m else '-'}  state err {r['serr']:.2e}  {r['status']}")
     if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)  # the PNGs are written first
         base = os.path.splitext(args.out)[0]
         pngs = (base + ".png", base + "_state.png")
         plot(scs, results, *pngs)

@@ -118,6 +118,7 @@ class PennyEnv(gym.Env):
         self._done = True
         self._renderer = None
         self._trail = deque(maxlen=200)
+        self._hud = {}  # what the frame's text line and impact flashes show (rendering.Renderer.draw)
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -156,6 +157,7 @@ class PennyEnv(gym.Env):
         self._d = math.sqrt(dx * dx + dy * dy)
         self._trail.clear()
         self._trail.append((x, y))
+        self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
         info = {"kinetic_energy": self._energy(), "time": 0.0, "distance": self._d}
         if self.render_mode == "human":
             self.render()
@@ -258,6 +260,9 @@ class PennyEnv(gym.Env):
             info["is_success"] = terminated
         if self.render_mode is not None:
             self._trail.append((x, y))
+            t0 = self._t - c.dt
+            self._hud["impacts"].extend((t0 + t, e, st) for t, e, st in events)
+            self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
         return self._obs(), float(reward), terminated, truncated, info
@@ -293,7 +298,7 @@ class PennyEnv(gym.Env):
         from .rendering import Renderer
         if self._renderer is None:
             self._renderer = Renderer(self._core, self.render_mode, self.metadata["render_fps"])
-        return self._renderer.draw(self._s, self._target, list(self._trail), self._arc)
+        return self._renderer.draw(self._s, self._target, list(self._trail), self._arc, self._hud)
 
     def close(self):
         if self._renderer is not None:

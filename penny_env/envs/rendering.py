@@ -3,11 +3,21 @@
 The frame shows the table (inside light, outside dark, the wall as a line, the marked arc of
 the impacts task in orange), the target (blue disc), the trail of the contact point (grey dots)
 and the penny seen from above: a black segment between its two ends with its front end marked
-by a red disc. y points up. pygame is imported only by the "human" mode.
+by a red disc. y points up. Impacts flash: a yellow ring around each impact point, widening and
+fading over FLASH_INTERVALS control intervals of simulated time. A text line at the top left
+shows the simulated time, the last step's reward and the episode's impact count. pygame is
+imported only by the "human" mode, which initialises pygame's display and nothing else (no audio).
+
+What the env passes (``Renderer.draw(state, target, trail, arc, hud)``), ``hud`` a dict, every key
+optional: ``time`` (simulated time [s]), ``reward`` (the last step's reward), ``impact_count``
+(impacts since the reset) and ``impacts``, the recent impacts as ``(time [s], end (+1 front / -1
+back), state at the impact)`` with times on the same clock as ``time``.
 """
 from __future__ import annotations
 
 import math
+import os
+import warnings
 
 import numpy as np
 
@@ -21,6 +31,55 @@ TARGET = np.array([40, 90, 230], np.uint8)
 TRAIL = np.array([150, 150, 170], np.uint8)
 PENNY = np.array([0, 0, 0], np.uint8)
 FRONT = np.array([220, 30, 30], np.uint8)
+FLASH = np.array([255, 215, 0], np.uint8)
+TEXT = np.array([255, 255, 255], np.uint8)
+TEXT_BOX = np.array([20, 20, 28], np.uint8)
+
+FLASH_INTERVALS = 4  # an impact's ring fades out over this many control intervals of simulated time
+
+# A 3 x 5 pixel font (rows top to bottom, "#" set) for the text line; drawn 2x.
+_GLYPHS = {
+    "0": ("###", "#.#", "#.#", "#.#", "###"), "1": (".#.", "##.", ".#.", ".#.", "###"),
+    "2": ("###", "..#", "###", "#..", "###"), "3": ("###", "..#", "###", "..#", "###"),
+    "4": ("#.#", "#.#", "###", "..#", "..#"), "5": ("###", "#..", "###", "..#", "###"),
+    "6": ("###", "#..", "###", "#.#", "###"), "7": ("###", "..#", "..#", "..#", "..#"),
+    "8": ("###", "#.#", "###", "#.#", "###"), "9": ("###", "#.#", "###", "..#", "###"),
+    ".": ("...", "...", "...", "...", ".#."), "-": ("...", "...", "###", "...", "..."),
+    "+": ("...", ".#.", "###", ".#.", "..."), " ": ("...", "...", "...", "...", "..."),
+    "A": (".#.", "#.#", "###", "#.#", "#.#"), "C": (".##", "#..", "#..", "#..", ".##"),
+    "D": ("##.", "#.#", "#.#", "#.#", "##."), "E": ("###", "#..", "##.", "#..", "###"),
+    "F": ("###", "#..", "##.", "#..", "#.."), "I": ("###", ".#.", ".#.", ".#.", "###"),
+    "M": ("#.#", "###", "###", "#.#", "#.#"), "N": ("##.", "#.#", "#.#", "#.#", "#.#"),
+    "P": ("##.", "#.#", "##.", "#..", "#.."), "R": ("##.", "#.#", "##.", "#.#", "#.#"),
+    "S": (".##", "#..", ".#.", "..#", "##."), "T": ("###", ".#.", ".#.", ".#.", ".#."),
+    "W": ("#.#", "#.#", "#.#", "###", "#.#"),
+}
+_GLYPH_MASKS = {c: np.array([[ch == "#" for ch in row] for row in g]) for c, g in _GLYPHS.items()}
+TEXT_SCALE = 2
+
+_warned_no_display = False
+
+
+def hud_text(hud: dict) -> str:
+    """The text line for a hud dict (see the module docstring)."""
+    parts = []
+    if "time" in hud:
+        parts.append(f"T {hud['time']:.2f} S")
+    if "reward" in hud:
+        parts.append(f"REWARD {hud['reward']:+.3f}")
+    if "impact_count" in hud:
+        parts.append(f"IMPACTS {int(hud['impact_count'])}")
+    return "   ".join(parts).upper()
+
+
+def _has_display() -> bool:
+    """Whether SDL can open a visible window here (a dummy/offscreen driver or no X/Wayland: no)."""
+    driver = os.environ.get("SDL_VIDEODRIVER", "")
+    if driver in ("dummy", "offscreen"):
+        return False
+    if os.name == "posix" and not os.uname().sysname == "Darwin":
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) or driver not in ("", "x11", "wayland")
+    return True
 
 
 class Renderer:
@@ -117,7 +176,52 @@ class Renderer:
         m = (cc - ax - t * dx) ** 2 + (rr - ay - t * dy) ** 2 <= half_px * half_px
         img[r0:r1, c0:c1][m] = color
 
-    def frame(self, s, target, trail, arc) -> np.ndarray:
+    def _ring(self, img, x, y, r_px, half_px, color, alpha):
+        """Blend an annulus of radius r_px and half-width half_px around (x, y) with color."""
+        cx, cy = (x - self.x0) * self.scale, (self.y1 - y) * self.scale
+        out = r_px + half_px
+        c0, c1 = max(int(cx - out) - 1, 0), min(int(cx + out) + 2, self.W)
+        r0, r1 = max(int(cy - out) - 1, 0), min(int(cy + out) + 2, self.H)
+        if c0 >= c1 or r0 >= r1:
+            return
+        cc, rr = np.meshgrid(np.arange(c0, c1) + 0.5, np.arange(r0, r1) + 0.5)
+        m = np.abs(np.hypot(cc - cx, rr - cy) - r_px) <= half_px
+        patch = img[r0:r1, c0:c1]
+        patch[m] = np.round(alpha * color + (1.0 - alpha) * patch[m]).astype(np.uint8)
+
+    def _flashes(self, img, hud):
+        """A ring at each recent impact point, widening and fading with the simulated time since it."""
+        now = hud.get("time")
+        impacts = hud.get("impacts") or ()
+        if now is None or not impacts:
+            return
+        fade = FLASH_INTERVALS * self.core.scene.control_dt
+        R = self.core.R
+        for t, end, st in impacts:
+            age = (now - t) / fade
+            if not 0.0 <= age < 1.0:
+                continue
+            px, py = st[0] + end * R * math.cos(st[3]), st[1] + end * R * math.sin(st[3])
+            self._ring(img, px, py, 4.0 + 8.0 * age, 1.6, FLASH, 1.0 - 0.8 * age)
+
+    def _text(self, img, text):
+        """The text line at the top left, white on a dark box, in the 3 x 5 font drawn TEXT_SCALE x."""
+        k = TEXT_SCALE
+        if self.H < 7 * k:
+            return
+        adv = 4 * k
+        w = min(len(text) * adv + 2 * k, self.W)
+        h = min(7 * k, self.H)
+        img[:h, :w] = (0.3 * img[:h, :w] + 0.7 * TEXT_BOX).astype(np.uint8)
+        for i, ch in enumerate(text):
+            mask = _GLYPH_MASKS.get(ch)
+            c0 = k + i * adv
+            if mask is None or c0 + 3 * k > self.W:
+                continue
+            big = np.kron(mask, np.ones((k, k), bool))
+            img[k:k + 5 * k, c0:c0 + 3 * k][big] = TEXT
+
+    def frame(self, s, target, trail, arc, hud=None) -> np.ndarray:
         img = self._background_with_arc(arc).copy()
         for (px, py) in trail[:-1]:
             self._disc(img, px, py, 1.2, TRAIL)
@@ -129,24 +233,36 @@ class Renderer:
         half = max(1.5, 0.12 * R * self.scale)
         self._segment(img, x - R * c, y - R * sn, x + R * c, y + R * sn, half, PENNY)
         self._disc(img, x + R * c, y + R * sn, max(2.5, 0.3 * R * self.scale), FRONT)
+        if hud:
+            self._flashes(img, hud)
+            text = hud_text(hud)
+            if text:
+                self._text(img, text)
         return img
 
-    def draw(self, s, target, trail, arc):
-        img = self.frame(s, target, trail, arc)
+    def draw(self, s, target, trail, arc, hud=None):
+        """The frame (rgb_array) or show it in the window (human); hud: see the module docstring."""
+        img = self.frame(s, target, trail, arc, hud)
         if self.mode == "rgb_array":
             return img
         self._show(img)
         return None
 
     def _show(self, img):
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
         try:
             import pygame
         except ImportError as exc:
             from gymnasium.error import DependencyNotInstalled
             raise DependencyNotInstalled('pygame-ce is needed for render_mode="human": pip install "penny-env[render]"') from exc
         if self.window is None:
-            pygame.init()
-            pygame.display.init()
+            global _warned_no_display
+            if not _has_display() and not _warned_no_display:
+                _warned_no_display = True
+                warnings.warn('render_mode="human": no display here (no DISPLAY / WAYLAND_DISPLAY, or SDL_VIDEODRIVER '
+                              f'{os.environ.get("SDL_VIDEODRIVER", "")!r}), so no window will be visible; '
+                              'use render_mode="rgb_array" to get the frames', UserWarning, stacklevel=4)
+            pygame.display.init()  # the display only: pygame.init() would also open audio (ALSA noise)
             self.window = pygame.display.set_mode((self.W, self.H))
             pygame.display.set_caption("penny_env")
             self.clock = pygame.time.Clock()
@@ -160,5 +276,4 @@ class Renderer:
         if self.window is not None:
             import pygame
             pygame.display.quit()
-            pygame.quit()
             self.window = None

@@ -79,11 +79,13 @@ def _keys(owner: str, value, allowed: dict) -> dict:
     return out
 
 
+# The scene defaults, written here only: the presets (penny_env/presets/scenes/*.yaml) give what differs.
 INIT_DEFAULTS = {"spawn_fraction": 0.7, "theta": [-3.141592653589793, 3.141592653589793],
-                 "phi": [-3.141592653589793, 3.141592653589793], "theta_dot": [-10.0, 10.0], "phi_dot": [-2.0, 2.0]}
-TORQUE_DEFAULTS = {"u1": 2.5e-6, "u2": 7.5e-6}
-OBS_SCALE_DEFAULTS = {"theta_dot": 20.0, "phi_dot": 10.0}
-PARAM_DEFAULTS = {"R": 0.01, "m": 0.0025, "I": 1.25e-7, "J": 6.25e-8}
+                 "phi": [-3.141592653589793, 3.141592653589793], "theta_dot": [-2.0, 2.0], "phi_dot": [-1.0, 1.0]}
+# +-1 action = +-limit [N m]: u1 = J * 10 rad/s^2 (steering), u2 = (I + m R^2) * 40 rad/s^2 (rolling), US penny
+TORQUE_DEFAULTS = {"u1": 6.25e-7, "u2": 1.5e-5}
+OBS_SCALE_DEFAULTS = {"theta_dot": 30.0, "phi_dot": 10.0}
+PARAM_DEFAULTS = {name: getattr(PennyParams(), name) for name in ("R", "m", "I", "J")}  # the US penny
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Baseline hybrid integrators for the bouncing penny, and uniform runners for every method.
+"""Other hybrid integrators for the bouncing penny (to compare penny_env with), and uniform runners for every method.
 
 Only the integration differs between the methods: every impact is applied with penny_env's own
 impact law (:func:`penny_env.physics.laws.apply_law`), so the comparison measures the flow and the
@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from ..physics import SolverSettings, advance_pennies, simulate
-from ..physics.flows import end_kinematics, kinetic_energy
+from ..physics.flows import end_kinematics
 from ..physics.laws import apply_law, make_law
 
 
@@ -355,6 +355,3 @@ def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample
     walls = [_hit_wall(p, e, params, table) for p, e in zip(states, ends)]
     return _finish(times, ends, states, S[:, 0], t, sample, status, k, walls, params)
 
-
-def energy(state, params) -> float:
-    return float(kinetic_energy(np.asarray(state, float)[:, None], params)[0])

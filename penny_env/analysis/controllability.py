@@ -1,6 +1,6 @@
 """Does controllability of the penny need impacts? (the open question of the paper's last section)
 
-    python -m training.controllability [--quick] [--samples 2000] [--out docs/controllability.md]
+    python -m penny_env.analysis.controllability [--quick] [--samples 2000] [--out docs/controllability.md]
 
 The controls are the paper's u1 (steering torque, J phi'' = u1) and u2 (rolling torque,
 (I + m R^2) theta'' = u2). Between impacts the speeds obey exactly these two equations, so with a
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -41,12 +40,12 @@ START = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])  # the paper's initial s
 def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[dict]:
     """One row per (actuation, scene, horizon): the range of the unactuated speed over the sampled
     reachable set, the share of sequences with impacts, and the final speeds."""
-    from penny_env.analysis.dynamics import reachable_set
+    from .common import progress as progress_bar
+    from .dynamics import reachable_set
 
     jobs = [(act, scene, T) for act in UNACTUATED for scene in SCENES for T in horizons]
-    bar = _progress(len(jobs), progress)
     rows = []
-    for act, scene, T in jobs:
+    for act, scene, T in progress_bar(jobs, desc="reachable sets", disable=None if progress else True):
         table, law = SCENES[scene]
         rs = reachable_set(START, T, table=table, law=law, actuation=act, n_samples=samples, seed=seed)
         k, name = UNACTUATED[act]
@@ -55,23 +54,7 @@ def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[
                      "min": float(v.min()), "max": float(v.max()), "min_abs": float(np.abs(v).min()), "spread": float(v.max() - v.min()),
                      "with_impacts": float(np.mean(rs.impact_counts > 0)),
                      "mean_impacts": float(rs.impact_counts.mean()), "final": rs.final_states[:, 4:6].copy()})
-        bar.update(1)
-    bar.close()
     return rows
-
-
-def _progress(total, enabled):
-    try:
-        from tqdm import tqdm
-        return tqdm(total=total, desc="reachable sets", disable=not enabled)
-    except ImportError:  # tqdm is in the [train] and [bench] extras
-        class _Quiet:
-            def update(self, _):
-                pass
-
-            def close(self):
-                pass
-        return _Quiet()
 
 
 def verdicts(rows) -> list[str]:
@@ -90,14 +73,16 @@ def verdicts(rows) -> list[str]:
 
 
 def main(argv=None):
-    from penny_env.analysis.common import header
+    from .common import header, report_path
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="few samples and one short horizon (for tests)")
     ap.add_argument("--samples", type=int, default=2000, help="control sequences per reachable set")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="docs/controllability.md")
+    ap.add_argument("--out", default=None,
+                    help="Markdown report, PNGs next to it (default: docs/controllability.md under the working "
+                    "directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     if args.samples < 1:
         ap.error(f"--samples must be >= 1, got {args.samples}")
@@ -105,11 +90,11 @@ def main(argv=None):
     horizons = (1.0,) if args.quick else (1.0, 3.0, 10.0)
     rows = study(samples, horizons, args.seed, progress=not args.quick)
 
-    out = Path(args.out)
+    out = report_path(args.out, args.quick, "controllability.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     png = out.with_name(out.stem + ".png")
     _plot(rows, max(horizons), png)
-    lines = header("Does controllability of the penny need impacts?", "training.controllability", argv)
+    lines = header("Does controllability of the penny need impacts?", "penny_env.analysis.controllability", argv)
     lines += [__doc__.split("\n\n", 2)[2].strip(), "",
               "## What the samples show", "", *verdicts(rows), "",
               f"## Unactuated speed over the sampled reachable sets ({samples} control sequences each)", "",
@@ -129,6 +114,7 @@ def main(argv=None):
               "reachable with one control and impacts (full controllability) is not settled by sampling.", ""]
     out.write_text("\n".join(lines))
     print("\n".join(lines))
+    print(f"wrote {out} and {png}")
     return rows
 
 
@@ -137,18 +123,25 @@ def _plot(rows, horizon, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.2))
     for ax, act in zip(axes, UNACTUATED):
         for r in (r for r in rows if r["actuation"] == act and r["horizon"] == horizon):
             plane = r["scene"] == "open plane"  # drawn on top: the line the invariant pins it to
             ax.scatter(r["final"][:, 0], r["final"][:, 1], s=8 if plane else 3, alpha=1.0 if plane else 0.5,
                        label=r["scene"], zorder=3 if plane else 2, color="black" if plane else None)
-        ax.legend(fontsize=7, markerscale=3)
-        ax.plot(START[4], START[5], "r*", ms=12, zorder=4)
+        ax.plot(START[4], START[5], "r*", ms=12, zorder=4, ls="none", label="initial speeds")
         ax.set_xlabel("theta_dot [rad/s]")
         ax.set_ylabel("phi_dot [rad/s]")
-        ax.set_title(f"{act} only ({UNACTUATED[act][1]} unactuated), t = {horizon:g} s; red star: initial", fontsize=9)
-    fig.tight_layout()
+        ax.set_title(f"{act} only ({UNACTUATED[act][1]} unactuated): speeds at t = {horizon:g} s", fontsize=9)
+    handles, labels = axes[0].get_legend_handles_labels()
+    legend = fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8)  # below: it hides no sample
+    for handle in legend.legend_handles:  # legible markers in the legend, whatever their size in the plot
+        if hasattr(handle, "set_sizes"):
+            handle.set_sizes([20.0])
+            handle.set_alpha(1.0)
+        else:
+            handle.set_markersize(9)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
