@@ -52,6 +52,7 @@ class Sensitivities:
     control_time_gradient: np.ndarray | None
     valid: bool
     reason: str
+    normal_speeds: np.ndarray  # relative normal speed of the end before each impact (1 head-on, 0 grazing)
 
 
 def phase_moments(phi0, w, acc1, tau, kmax=3):
@@ -185,12 +186,13 @@ def impact_linearisation(pre, sigma, params, table, law):
     return post, D, grad_g
 
 
-def trajectory_jacobians(traj, table, law, controls=None, control_dt=None, n_impacts=None,
+def trajectory_jacobians(traj, table, law, controls=None, control_dt=None, n_impacts=None, t_final=None,
                          params=None) -> Sensitivities:
     """The derivatives of traj.final_state along traj's event sequence (see the module docstring).
 
     traj: a Trajectory from simulate() (its segments and impacts); table, law: the physics objects it
-    ran with; controls (K, 2) and control_dt as given to simulate(); n_impacts as given to simulate()."""
+    ran with; controls (K, 2), control_dt, n_impacts and t_final as simulate() used them (t_final
+    None: the run stops at its n_impacts-th impact)."""
     from .scalar import flow1
 
     params = traj.params if params is None else params
@@ -205,10 +207,14 @@ def trajectory_jacobians(traj, table, law, controls=None, control_dt=None, n_imp
     if traj.rest_times.size:
         invalid.append(f"a Zeno accumulation brought the penny to rest at t={traj.rest_times[0]:.6g} s "
                        "(its velocity is reset to zero: no derivative)")
+    if not traj.complete and n_impacts is not None and t_final is None:
+        invalid.append("the run stopped before its n_impacts at a time set by the state itself "
+                       "(complete=False without t_final): no derivative at a fixed time")
     stop_at_impact = (n_impacts is not None and traj.n_impacts >= n_impacts and traj.n_impacts > 0
                       and traj.final_time == traj.impact_times[-1])
     time_grad = np.zeros(6)
     ctime_grad = np.zeros(2 * K) if K else None
+    speeds = []
     j = 0  # next impact
     k = 0  # control row
     for i in range(n):
@@ -240,9 +246,10 @@ def trajectory_jacobians(traj, table, law, controls=None, control_dt=None, n_imp
             vy = R * pre[THETA_DOT] * math.sin(pre[PHI]) + sigma * R * pre[PHI_DOT] * math.cos(pre[PHI])
             end_speed = math.hypot(vx, vy)
             gnorm = math.hypot(grad_g[X], grad_g[Y])
+            speeds.append(normal / max(gnorm * end_speed, 1e-300))
             if not normal > GRAZING_SPEED * gnorm * end_speed:
                 invalid.append(f"grazing impact {j} at t={traj.impact_times[j]:.6g} s (relative normal speed "
-                               f"{normal / max(gnorm * end_speed, 1e-300):.3g}): no derivative")
+                               f"{speeds[-1]:.3g}): no derivative")
             dt_ds = -(grad_g @ S) / normal  # how the impact time moves
             last = stop_at_impact and j == traj.n_impacts - 1
             if last:  # the run ends at this impact: the final time moves with it
@@ -266,4 +273,4 @@ def trajectory_jacobians(traj, table, law, controls=None, control_dt=None, n_imp
         C = None if C is None else np.full_like(C, np.nan)
         time_grad = np.full(6, np.nan)
         ctime_grad = None if ctime_grad is None else np.full_like(ctime_grad, np.nan)
-    return Sensitivities(S, C, time_grad, ctime_grad, valid, "; ".join(invalid))
+    return Sensitivities(S, C, time_grad, ctime_grad, valid, "; ".join(invalid), np.array(speeds))

@@ -45,6 +45,7 @@ class Trajectory:
     jacobian_reason: str = ""
     final_time_gradient: np.ndarray | None = field(repr=False, default=None)
     final_time_control_gradient: np.ndarray | None = field(repr=False, default=None)
+    impact_normal_speeds: np.ndarray | None = field(repr=False, default=None)
 
     @property
     def n_impacts(self) -> int:
@@ -175,17 +176,18 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
                       final, float(t), np.array(rests), complete, params,
                       np.array(seg_t), np.array(seg_s).reshape(-1, 6), np.array(seg_acc))
     if sensitivities:
-        _attach_sensitivities(traj, table, law, u, cdt, n_impacts)
+        _attach_sensitivities(traj, table, law, u, cdt, n_impacts, t_final)
     return traj
 
 
-def _attach_sensitivities(traj, table, law, controls, control_dt, n_impacts):
+def _attach_sensitivities(traj, table, law, controls, control_dt, n_impacts, t_final):
     from .sensitivity import trajectory_jacobians
 
-    sens = trajectory_jacobians(traj, table, law, controls, control_dt, n_impacts)
+    sens = trajectory_jacobians(traj, table, law, controls, control_dt, n_impacts, t_final)
     traj.jacobian, traj.control_jacobian = sens.jacobian, sens.control_jacobian
     traj.jacobian_valid, traj.jacobian_reason = sens.valid, sens.reason
     traj.final_time_gradient, traj.final_time_control_gradient = sens.time_gradient, sens.control_time_gradient
+    traj.impact_normal_speeds = sens.normal_speeds
 
 
 def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
