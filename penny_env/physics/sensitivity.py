@@ -20,8 +20,10 @@ Otherwise final_time is held fixed.
 
 Where the derivative does not exist the result says so (valid False with a reason, the matrices
 NaN): a grazing impact (relative normal speed below GRAZING_SPEED), a Zeno accumulation brought
-to rest (or a penny pinned against the wall), a table whose wall has no Hessian at the impact is
-handled by central differences of its gradient (accurate to ~1e-10, not to round-off).
+to rest (or a penny pinned against the wall), a run that stopped short of its n_impacts at a time
+set by the state itself. The saltation matrix needs the wall's Hessian: a table without
+hessian() (a plain ConvexTable) gets it from central differences of its gradient, accurate to
+about 1e-10 relative rather than to round-off.
 """
 from __future__ import annotations
 
