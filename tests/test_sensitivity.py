@@ -261,3 +261,14 @@ def test_volume_law(scene):
     e = 1.0 if law == "elastic" else law
     expected = e ** (2 * traj.n_impacts)
     assert np.linalg.det(traj.jacobian) == pytest.approx(expected, rel=1e-6)
+
+
+def test_batched_flow_jacobians_match_one_at_a_time():
+    from penny_env.physics.sensitivity import flow_jacobian, flow_jacobians
+
+    state = np.array([0.01, -0.02, 0.3, 1.1, 37.0, -4.5])
+    taus = np.array([0.01, 0.05, 0.2, 0.9])
+    Phi, B = flow_jacobians(state, 8.0, -30.0, taus, 0.01)
+    for i, tau in enumerate(taus):
+        P1, B1 = flow_jacobian(state, 8.0, -30.0, tau, 0.01)
+        assert np.allclose(Phi[i], P1, rtol=1e-13, atol=1e-15) and np.allclose(B[i], B1, rtol=1e-13, atol=1e-15)

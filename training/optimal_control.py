@@ -38,7 +38,7 @@ import numpy as np
 import penny_env as pe
 from penny_env.physics.kernels import end_point, SCALAR
 from penny_env.physics.scalar import flow1
-from penny_env.physics.sensitivity import flow_jacobian
+from penny_env.physics.sensitivity import flow_jacobians
 
 EFFORT_ROWS = 30      # minimum effort: horizon in control rows (1.5 s at 0.05 s)
 MAX_ROWS = 40         # minimum time: the longest horizon tried
@@ -132,7 +132,7 @@ def wall_gradient(prob, s, sigma):
 
 # -- the shooting functions: final state, path samples and their derivatives w.r.t. v = u / limits ----
 def rollout(prob, v):
-    """(final state, d final / d v (6 x 2K), path samples [(h, dh/dv)] or None, valid, reason)."""
+    """(final state, d final / d v (6 x 2K), path samples (h (n,), dh/dv (n, 2K)) or None, valid, reason)."""
     K = v.shape[0]
     u = v * prob.limits[None, :]
     scale = np.tile(prob.limits, K)  # du / dv
@@ -144,19 +144,23 @@ def rollout(prob, v):
     R, J, Itot = prob.params.R, prob.params.J, prob.params.rolling_inertia
     s = tuple(prob.start)
     C = np.zeros((6, 2 * K))
-    samples = []
+    hs, dh = [], []
+    taus = prob.dt * np.arange(1, SUBSAMPLES + 2) / (SUBSAMPLES + 1)
+    dacc = np.array([1.0 / J, 1.0 / Itot])
     for k in range(K):
         a1, a2 = u[k, 0] / J, u[k, 1] / Itot
-        for j in range(1, SUBSAMPLES + 2):
-            tau = prob.dt * j / (SUBSAMPLES + 1)
-            Phi, B = flow_jacobian(np.array(s), a1, a2, tau, R)
-            Ck = Phi @ C
-            Ck[:, 2 * k:2 * k + 2] += B * np.array([1.0 / J, 1.0 / Itot])[None, :]
+        Phi, B = flow_jacobians(np.array(s), a1, a2, taus, R)
+        Cs = Phi @ C  # (n, 6, 2K)
+        Cs[:, :, 2 * k:2 * k + 2] += B * dacc[None, None, :]
+        G = np.empty((len(taus), 2, 6))
+        for j, tau in enumerate(taus):
             st = flow1(s, a1, a2, tau, R)
-            for sigma in (1.0, -1.0):
-                h, g = wall_gradient(prob, st, sigma)
-                samples.append((h, (g @ Ck) * scale))
-        s, C = st, Ck
+            for e, sigma in enumerate((1.0, -1.0)):
+                h, G[j, e] = wall_gradient(prob, st, sigma)
+                hs.append(h)
+        dh.append(np.einsum("jei,jik->jek", G, Cs).reshape(-1, 2 * K))
+        s, C = st, Cs[-1]
+    samples = (np.array(hs), np.concatenate(dh) * scale[None, :])
     return np.array(s), C * scale[None, :], samples, True, ""
 
 
@@ -216,10 +220,10 @@ def solve_rows(prob, K, objective="effort", x0=None, maxiter=200):
         return np.nan_to_num(np.array(rows))
 
     def path(x):
-        return np.array([-(h + prob.margin) / prob.margin for h, _ in run(x)[2]])
+        return -(run(x)[2][0] + prob.margin) / prob.margin
 
     def path_jac(x):
-        return np.array([-g / prob.margin for _, g in run(x)[2]])
+        return -run(x)[2][1] / prob.margin
 
     cons = [{"type": "ineq", "fun": terminal, "jac": terminal_jac}]
     if not prob.impacts and prob.margin > 0:

@@ -101,6 +101,48 @@ def flow_jacobian(state, acc1, acc2, tau, R):
     return Phi, B
 
 
+def flow_jacobians(state, acc1, acc2, taus, R):
+    """:func:`flow_jacobian` at several increasing times taus (n,) at once: (Phi (n, 6, 6), B (n, 6, 2)).
+
+    The moments are accumulated over the gaps between consecutive times, each gap with the panel count
+    of the whole sweep (<= 3 rad of phase per panel), so every time gets the same accuracy."""
+    taus = np.asarray(taus, dtype=float)
+    W, w, ph = state[THETA_DOT], state[PHI_DOT], state[PHI]
+    t_end = float(taus[-1])
+    sweep = max(abs(w), abs(w + acc1 * t_end)) * t_end + 0.5 * abs(acc1) * t_end * t_end
+    n = max(1, math.ceil(sweep / MAX_PHASE_PER_PANEL))
+    lo = np.concatenate([[0.0], taus[:-1]])
+    width = (taus - lo) / n  # (m,)
+    start = lo[:, None] + width[:, None] * np.arange(n)[None, :]  # (m, n) panel starts
+    s = start[:, :, None] + width[:, None, None] * _GL_NODES[None, None, :]
+    wt = np.broadcast_to(width[:, None, None] * _GL_WEIGHTS[None, None, :], s.shape)
+    phase = ph + s * (w + 0.5 * acc1 * s)
+    c, sn = np.cos(phase) * wt, np.sin(phase) * wt
+    powers = s[None] ** np.arange(4)[:, None, None, None]  # (4, m, n, nodes)
+    C = np.cumsum((powers * c[None]).sum(axis=(2, 3)), axis=1)  # (4, m)
+    S = np.cumsum((powers * sn[None]).sum(axis=(2, 3)), axis=1)
+    m = taus.shape[0]
+    Phi = np.broadcast_to(np.eye(6), (m, 6, 6)).copy()
+    Phi[:, X, PHI] = -R * (W * S[0] + acc2 * S[1])
+    Phi[:, Y, PHI] = R * (W * C[0] + acc2 * C[1])
+    Phi[:, X, THETA_DOT] = R * C[0]
+    Phi[:, Y, THETA_DOT] = R * S[0]
+    Phi[:, X, PHI_DOT] = -R * (W * S[1] + acc2 * S[2])
+    Phi[:, Y, PHI_DOT] = R * (W * C[1] + acc2 * C[2])
+    Phi[:, THETA, THETA_DOT] = taus
+    Phi[:, PHI, PHI_DOT] = taus
+    B = np.zeros((m, 6, 2))
+    B[:, X, 0] = -0.5 * R * (W * S[2] + acc2 * S[3])
+    B[:, Y, 0] = 0.5 * R * (W * C[2] + acc2 * C[3])
+    B[:, X, 1] = R * C[1]
+    B[:, Y, 1] = R * S[1]
+    B[:, PHI, 0] = 0.5 * taus * taus
+    B[:, PHI_DOT, 0] = taus
+    B[:, THETA, 1] = 0.5 * taus * taus
+    B[:, THETA_DOT, 1] = taus
+    return Phi, B
+
+
 def vector_field(state, acc1, acc2, R):
     """ds/dt at a state under constant angular accelerations."""
     W, w, ph = state[THETA_DOT], state[PHI_DOT], state[PHI]
