@@ -20,6 +20,12 @@ speed |R theta_dot| below ``speed_tolerance`` too (park).
 * **minimum time**: the fewest rows K <= ``MAX_ROWS`` for which the terminal set is reachable (bisection
   on K, assuming that reachability at K rows implies it at more rows; each K is a feasibility solve).
 
+SLSQP is a local solver. The impacts-forbidden problem is solved first from zero torques; its optimum
+never touches the wall, so it is feasible with impacts allowed and seeds that solve, together with zero
+torques and ``random_starts`` seeded random sequences: the impacts-allowed value is the best of these
+(never worse than the forbidden one when that converged). A gap therefore shows an optimum that uses
+impacts and is better; no gap does not prove that no better one with impacts exists.
+
 Every solve is verified by simulating its controls again on the table; a solve that fails to converge
 or whose verification fails is reported as such ("failed"), never dropped.
 """
@@ -249,14 +255,41 @@ def solve_rows(prob, K, objective="effort", x0=None, maxiter=200):
     return Solution(status, K, float(res.x @ res.x) / n, u, tr.n_impacts, dist, prob.dt, time.perf_counter() - t0, tr)
 
 
-def minimum_effort(prob, rows=EFFORT_ROWS, maxiter=200):
-    return solve_rows(prob, rows, maxiter=maxiter)
+def solve_best(prob, K, starts=(), random_starts=0, seed=0, maxiter=200):
+    """The best verified solve over K rows from zero torques, the given starting controls (scaled, (K, 2)) and
+    random_starts seeded random ones (local solvers find local optima: more starts, a better chance of the
+    global one). The last failure when none succeeds."""
+    rng = np.random.default_rng(seed)
+    guesses = [None] + [np.asarray(g, dtype=float) for g in starts]
+    guesses += [rng.uniform(-1.0, 1.0, (K, 2)) * (prob.limits > 0)[None, :] for _ in range(random_starts)]
+    best = None
+    for x0 in guesses:
+        sol = solve_rows(prob, K, x0=x0, maxiter=maxiter)
+        if best is None or (sol.ok and (not best.ok or sol.effort < best.effort)):
+            best = sol
+    return best
 
 
-def minimum_time(prob, max_rows=MAX_ROWS, maxiter=200):
-    """The fewest rows that reach the terminal set (bisection on K); status failed if none up to max_rows."""
+def minimum_effort(prob, rows=EFFORT_ROWS, maxiter=200, hint=None, random_starts=0):
+    """Minimum effort over a fixed horizon; hint: a solution whose controls start one more solve."""
+    starts = [] if hint is None or not hint.ok or hint.rows != rows else [hint.controls / _safe(prob.limits)]
+    return solve_best(prob, rows, starts, random_starts, maxiter=maxiter)
+
+
+def _safe(limits):
+    return np.where(limits > 0, limits, 1.0)[None, :]
+
+
+def minimum_time(prob, max_rows=MAX_ROWS, maxiter=200, hint=None, random_starts=0):
+    """The fewest rows that reach the terminal set (bisection on K, assuming that what K rows reach, more
+    rows reach too); status failed if none up to max_rows. hint: a solution (e.g. the impacts-forbidden
+    optimum) whose row count is tried first as the upper end."""
     t0 = time.perf_counter()
-    hi = solve_rows(prob, max_rows, maxiter=maxiter)
+    hi = None
+    if hint is not None and hint.ok and hint.rows <= max_rows:
+        hi = solve_best(prob, hint.rows, [hint.controls / _safe(prob.limits)], 0, maxiter=maxiter)
+    if hi is None or not hi.ok:
+        hi = solve_best(prob, max_rows, (), random_starts, maxiter=maxiter)
     if not hi.ok:
         hi.status = f"failed: not reached within {max_rows} rows ({hi.status})"
         hi.seconds = time.perf_counter() - t0
@@ -264,7 +297,7 @@ def minimum_time(prob, max_rows=MAX_ROWS, maxiter=200):
     lo_rows, best = 0, hi
     while best.rows - lo_rows > 1:
         mid = (lo_rows + best.rows) // 2
-        sol = solve_rows(prob, mid, maxiter=maxiter)
+        sol = solve_best(prob, mid, (), random_starts, seed=mid, maxiter=maxiter)
         if sol.ok:
             best = sol
         else:
@@ -301,17 +334,20 @@ def draw_pairs(scene, task, n, seed, margin=DEFAULT_MARGIN):
 
 
 def study(n_pairs, seed=0, scenes=SCENES, tasks=TASKS, objectives=OBJECTIVES, actuation="both", progress=True,
-          effort_rows=EFFORT_ROWS, max_rows=MAX_ROWS, maxiter=200):
+          effort_rows=EFFORT_ROWS, max_rows=MAX_ROWS, maxiter=200, random_starts=2):
     rows = []
     jobs = [(sc, tk, ob) for sc in scenes for tk in tasks for ob in objectives]
     for sc, tk, ob in jobs:
         for i, (s, target) in enumerate(draw_pairs(sc, tk, n_pairs, seed)):
             out = {"scene": sc, "task": tk, "objective": ob, "pair": i, "actuation": actuation}
-            for impacts in (True, False):
-                prob = Problem(sc, tk, s, target, impacts=impacts, actuation=actuation)
-                sol = (minimum_effort(prob, effort_rows, maxiter) if ob == "effort"
-                       else minimum_time(prob, max_rows, maxiter))
-                out["with" if impacts else "without"] = sol
+            # impacts forbidden first: its optimum is feasible with impacts allowed (it never touches the
+            # wall), so it seeds the allowed solve, which then can only do as well or better
+            solve = minimum_effort if ob == "effort" else minimum_time
+            horizon = effort_rows if ob == "effort" else max_rows
+            without = solve(Problem(sc, tk, s, target, impacts=False, actuation=actuation), horizon, maxiter)
+            out["without"] = without
+            out["with"] = solve(Problem(sc, tk, s, target, impacts=True, actuation=actuation), horizon, maxiter,
+                                hint=without, random_starts=random_starts)
             rows.append(out)
             if progress:
                 w, wo = out["with"], out["without"]
@@ -331,9 +367,9 @@ def summarise(rows, rel_gap=1e-3):
     """Per (scene, task, objective): pairs, converged counts, share where the optimum with impacts is strictly
     better (by more than rel_gap relative, both converged), and the mean gap there."""
     out = []
-    keys = sorted({(r["scene"], r["task"], r["objective"]) for r in rows})
+    keys = sorted({(r["scene"], r["task"], r["objective"], r.get("actuation", "both")) for r in rows})
     for key in keys:
-        sel = [r for r in rows if (r["scene"], r["task"], r["objective"]) == key]
+        sel = [r for r in rows if (r["scene"], r["task"], r["objective"], r.get("actuation", "both")) == key]
         both = [r for r in sel if r["with"].ok and r["without"].ok]
         better, gaps = 0, []
         for r in both:
@@ -341,7 +377,7 @@ def summarise(rows, rel_gap=1e-3):
             if a < b * (1 - rel_gap) - 1e-15:
                 better += 1
                 gaps.append((b - a) / b if b > 0 else math.inf)
-        out.append({"scene": key[0], "task": key[1], "objective": key[2], "pairs": len(sel),
+        out.append({"scene": key[0], "task": key[1], "objective": key[2], "actuation": key[3], "pairs": len(sel),
                     "ok_with": sum(r["with"].ok for r in sel), "ok_without": sum(r["without"].ok for r in sel),
                     "both": len(both), "better": better, "mean_gap": float(np.mean(gaps)) if gaps else math.nan,
                     "only_with": sum(r["with"].ok and not r["without"].ok for r in sel),
@@ -390,17 +426,19 @@ def write_report(rows, out_path: Path, command: str, seconds: float):
              f"Generated by `{command}` ({time.strftime('%Y-%m-%d')}, {seconds:.0f} s). "
              "Method: see the docstring of `training/optimal_control.py` (single shooting over the control rows, "
              "SLSQP, exact derivatives through impacts from `simulate(..., sensitivities=True)`).", "",
-             "| scene | task | objective | pairs | converged with / without impacts | both | with impacts strictly better | "
-             "mean gap | solved only with impacts | optimum uses impacts |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| scene | task | objective | actuation | pairs | converged with / without impacts | both | "
+             "with impacts strictly better | mean gap | solved only with impacts | optimum uses impacts |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in summary:
         share = f"{s['better']}/{s['both']}" + (f" ({100 * s['better'] / s['both']:.0f}%)" if s["both"] else "")
         gap = "-" if math.isnan(s["mean_gap"]) else f"{100 * s['mean_gap']:.1f}%"
-        lines.append(f"| {s['scene']} | {s['task']} | {s['objective']} | {s['pairs']} | {s['ok_with']} / {s['ok_without']} "
+        lines.append(f"| {s['scene']} | {s['task']} | {s['objective']} | {s['actuation']} | {s['pairs']} "
+                     f"| {s['ok_with']} / {s['ok_without']} "
                      f"| {s['both']} | {share} | {gap} | {s['only_with']} | {s['impacts_used']} |")
-    lines += ["", "Effort: mean of (u / torque limit)^2 over the rows; time: rows x control_dt. Failed solves:", ""]
+    lines += ["", "Not done here: the comparison with the RL agents of the study (issue 11) on the same pairs.",
+              "", "Effort: mean of (u / torque limit)^2 over the rows; time: rows x control_dt. Failed solves:", ""]
     failed = [(r, k) for r in rows for k in ("with", "without") if not r[k].ok]
-    lines += [f"* {r['scene']} {r['task']} {r['objective']} pair {r['pair']}, impacts "
+    lines += [f"* {r['scene']} {r['task']} {r['objective']} ({r.get('actuation', 'both')}) pair {r['pair']}, impacts "
               f"{'allowed' if k == 'with' else 'forbidden'}: {r[k].status}" for r, k in failed] or ["* none"]
     if has_png:
         lines += ["", f"![optimal trajectories]({png.name})", "",
@@ -414,6 +452,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="2 pairs of one scene/task, to a temporary folder (never docs/)")
     ap.add_argument("--pairs", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--single-input-pairs", type=int, default=None,
+                    help="pairs for the steer-only and drive-only minimum-time problems (default: --pairs)")
     ap.add_argument("--out", type=Path, default=None, help="report path (default docs/optimal_control.md; "
                                                               "--quick: a temporary folder)")
     args = ap.parse_args(argv)
@@ -424,10 +464,14 @@ def main(argv=None):
         out = args.out or Path(tempfile.mkdtemp(prefix="optimal_control_")) / "optimal_control.md"
         if out.resolve().parent == (Path(__file__).resolve().parents[1] / "docs"):
             raise SystemExit("--quick never writes into docs/")
-        rows = study(2, args.seed, scenes=("ellipse",), tasks=("reach",), objectives=("effort",), effort_rows=EFFORT_ROWS, maxiter=100)
+        rows = study(2, args.seed, scenes=("ellipse",), tasks=("reach",), objectives=("effort",), effort_rows=EFFORT_ROWS, maxiter=100,
+                     random_starts=1)
     else:
         out = args.out or Path(__file__).resolve().parents[1] / "docs" / "optimal_control.md"
         rows = study(args.pairs, args.seed)
+        single = args.pairs if args.single_input_pairs is None else args.single_input_pairs
+        for act in ("steer", "drive"):  # which single-input problems have solutions only with impacts?
+            rows += study(single, args.seed, tasks=("reach",), objectives=("time",), actuation=act)
     out.parent.mkdir(parents=True, exist_ok=True)
     cmd = "python -m training.optimal_control" + (" --quick" if args.quick else f" --pairs {args.pairs}")
     write_report(rows, out, cmd, time.perf_counter() - t0)
