@@ -230,13 +230,13 @@ def impact_linearisation(pre, sigma, params, table, law):
     return post, D, grad_g
 
 
-def trajectory_jacobians(traj, table, law, controls=None, control_dt=None, n_impacts=None, t_final=None,
+def trajectory_jacobians(traj, table, law, controls=None, n_impacts=None, t_final=None,
                          params=None) -> Sensitivities:
     """The derivatives of traj.final_state along traj's event sequence (see the module docstring).
 
     traj: a Trajectory from simulate() (its segments and impacts); table, law: the physics objects it
-    ran with; controls (K, 2), control_dt, n_impacts and t_final as simulate() used them (t_final
-    None: the run stops at its n_impacts-th impact)."""
+    ran with; controls (K, 2), n_impacts and t_final as simulate() used them (t_final None: the run
+    stops at its n_impacts-th impact). The control rows' times come from the trajectory's segments."""
     from .scalar import flow1
 
     params = traj.params if params is None else params

@@ -176,14 +176,14 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
                       final, float(t), np.array(rests), complete, params,
                       np.array(seg_t), np.array(seg_s).reshape(-1, 6), np.array(seg_acc))
     if sensitivities:
-        _attach_sensitivities(traj, table, law, u, cdt, n_impacts, t_final)
+        _attach_sensitivities(traj, table, law, u, n_impacts, t_final)
     return traj
 
 
-def _attach_sensitivities(traj, table, law, controls, control_dt, n_impacts, t_final):
+def _attach_sensitivities(traj, table, law, controls, n_impacts, t_final):
     from .sensitivity import trajectory_jacobians
 
-    sens = trajectory_jacobians(traj, table, law, controls, control_dt, n_impacts, t_final)
+    sens = trajectory_jacobians(traj, table, law, controls, n_impacts, t_final)
     traj.jacobian, traj.control_jacobian = sens.jacobian, sens.control_jacobian
     traj.jacobian_valid, traj.jacobian_reason = sens.valid, sens.reason
     traj.final_time_gradient, traj.final_time_control_gradient = sens.time_gradient, sens.control_time_gradient
