@@ -57,8 +57,10 @@ def test_minimum_time_is_the_fewest_rows():
 
 
 def test_quick_run_writes_report_outside_docs(tmp_path):
-    out = oc.main(["--quick", "--out", str(tmp_path / "oc.md")])
+    out = oc.main(["--quick", "--workers", "2", "--out", str(tmp_path / "oc.md")])
     text = out.read_text()
     assert "| ellipse | reach | effort | both | 2 |" in text and "Failed solves" in text
     with pytest.raises(SystemExit):
         oc.main(["--quick", "--out", str(oc.Path(oc.__file__).resolve().parents[1] / "docs" / "x.md")])
+    with pytest.raises(SystemExit):
+        oc.main(["--pairs", "0"])

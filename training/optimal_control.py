@@ -1,6 +1,6 @@
 """Does the optimal penny need impacts? Trajectory optimisation with exact derivatives through impacts.
 
-    python -m training.optimal_control [--quick] [--pairs 50] [--out docs/optimal_control.md]
+    python -m training.optimal_control [--quick] [--pairs 50] [--workers 16] [--out docs/optimal_control.md]
 
 For start/target pairs drawn as the environments draw them (penny_env/presets: the paper's ellipse and
 the stadium, reach and park tasks), each problem is solved twice:
@@ -297,7 +297,8 @@ def minimum_time(prob, max_rows=MAX_ROWS, maxiter=200, hint=None, random_starts=
     lo_rows, best = 0, hi
     while best.rows - lo_rows > 1:
         mid = (lo_rows + best.rows) // 2
-        sol = solve_best(prob, mid, (), random_starts, seed=mid, maxiter=maxiter)
+        # warm start: the shorter horizon begins as the best solution does
+        sol = solve_best(prob, mid, [best.controls[:mid] / _safe(prob.limits)], 0, maxiter=maxiter)
         if sol.ok:
             best = sol
         else:
@@ -333,27 +334,43 @@ def draw_pairs(scene, task, n, seed, margin=DEFAULT_MARGIN):
     return pairs
 
 
+def solve_pair(job):
+    """One pair of one problem, solved with impacts forbidden and allowed: the study's unit of work."""
+    sc, tk, ob, i, s, target, actuation, horizon, maxiter, random_starts = job
+    # impacts forbidden first: its optimum is feasible with impacts allowed (it never touches the wall),
+    # so it seeds the allowed solve, which then can only do as well or better
+    solve = minimum_effort if ob == "effort" else minimum_time
+    without = solve(Problem(sc, tk, s, target, impacts=False, actuation=actuation), horizon, maxiter)
+    with_ = solve(Problem(sc, tk, s, target, impacts=True, actuation=actuation), horizon, maxiter,
+                  hint=without, random_starts=random_starts)
+    return {"scene": sc, "task": tk, "objective": ob, "pair": i, "actuation": actuation,
+            "with": with_, "without": without}
+
+
 def study(n_pairs, seed=0, scenes=SCENES, tasks=TASKS, objectives=OBJECTIVES, actuation="both", progress=True,
-          effort_rows=EFFORT_ROWS, max_rows=MAX_ROWS, maxiter=200, random_starts=2):
-    rows = []
-    jobs = [(sc, tk, ob) for sc in scenes for tk in tasks for ob in objectives]
-    for sc, tk, ob in jobs:
-        for i, (s, target) in enumerate(draw_pairs(sc, tk, n_pairs, seed)):
-            out = {"scene": sc, "task": tk, "objective": ob, "pair": i, "actuation": actuation}
-            # impacts forbidden first: its optimum is feasible with impacts allowed (it never touches the
-            # wall), so it seeds the allowed solve, which then can only do as well or better
-            solve = minimum_effort if ob == "effort" else minimum_time
-            horizon = effort_rows if ob == "effort" else max_rows
-            without = solve(Problem(sc, tk, s, target, impacts=False, actuation=actuation), horizon, maxiter)
-            out["without"] = without
-            out["with"] = solve(Problem(sc, tk, s, target, impacts=True, actuation=actuation), horizon, maxiter,
-                                hint=without, random_starts=random_starts)
-            rows.append(out)
-            if progress:
-                w, wo = out["with"], out["without"]
-                print(f"{sc} {tk} {ob} #{i}: with impacts {w.status} ({value(w, ob):.4g}), "
-                      f"without {wo.status} ({value(wo, ob):.4g})", file=sys.stderr, flush=True)
+          effort_rows=EFFORT_ROWS, max_rows=MAX_ROWS, maxiter=200, random_starts=2, workers=1):
+    """Every (scene, task, objective) on n_pairs pairs; workers > 1 solves pairs in that many processes."""
+    jobs = [(sc, tk, ob, i, s, target, actuation, effort_rows if ob == "effort" else max_rows, maxiter,
+             random_starts)
+            for sc in scenes for tk in tasks for ob in objectives
+            for i, (s, target) in enumerate(draw_pairs(sc, tk, n_pairs, seed))]
+    if workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers) as pool:
+            results = pool.map(solve_pair, jobs)
+            rows = [_report_progress(r, progress) for r in results]
+    else:
+        rows = [_report_progress(solve_pair(job), progress) for job in jobs]
     return rows
+
+
+def _report_progress(row, progress):
+    if progress:
+        w, wo, ob = row["with"], row["without"], row["objective"]
+        print(f"{row['scene']} {row['task']} {ob} ({row['actuation']}) #{row['pair']}: with impacts {w.status} "
+              f"({value(w, ob):.4g}), without {wo.status} ({value(wo, ob):.4g})", file=sys.stderr, flush=True)
+    return row
 
 
 def value(sol, objective):
@@ -452,6 +469,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="2 pairs of one scene/task, to a temporary folder (never docs/)")
     ap.add_argument("--pairs", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=1, help="processes solving pairs in parallel")
     ap.add_argument("--single-input-pairs", type=int, default=None,
                     help="pairs for the steer-only and drive-only minimum-time problems (default: --pairs)")
     ap.add_argument("--out", type=Path, default=None, help="report path (default docs/optimal_control.md; "
@@ -459,19 +477,22 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.pairs < 1:
         raise SystemExit("--pairs must be >= 1")
+    if args.workers < 1:
+        raise SystemExit("--workers must be >= 1")
     t0 = time.perf_counter()
     if args.quick:
         out = args.out or Path(tempfile.mkdtemp(prefix="optimal_control_")) / "optimal_control.md"
         if out.resolve().parent == (Path(__file__).resolve().parents[1] / "docs"):
             raise SystemExit("--quick never writes into docs/")
         rows = study(2, args.seed, scenes=("ellipse",), tasks=("reach",), objectives=("effort",), effort_rows=EFFORT_ROWS, maxiter=100,
-                     random_starts=1)
+                     random_starts=1, workers=args.workers)
     else:
         out = args.out or Path(__file__).resolve().parents[1] / "docs" / "optimal_control.md"
-        rows = study(args.pairs, args.seed)
+        rows = study(args.pairs, args.seed, workers=args.workers)
         single = args.pairs if args.single_input_pairs is None else args.single_input_pairs
         for act in ("steer", "drive"):  # which single-input problems have solutions only with impacts?
-            rows += study(single, args.seed, tasks=("reach",), objectives=("time",), actuation=act)
+            rows += study(single, args.seed, tasks=("reach",), objectives=("time",), actuation=act,
+                          workers=args.workers)
     out.parent.mkdir(parents=True, exist_ok=True)
     cmd = "python -m training.optimal_control" + (" --quick" if args.quick else f" --pairs {args.pairs}")
     write_report(rows, out, cmd, time.perf_counter() - t0)
