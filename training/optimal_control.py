@@ -413,7 +413,11 @@ def summarise(rows, rel_gap=1e-3):
 
 
 def plot_examples(rows, path, n=4):
-    import matplotlib
+    """A PNG of up to n optimal trajectories (those using impacts first); False without matplotlib."""
+    try:
+        import matplotlib
+    except ImportError:  # an optional extra: the report is written without the picture
+        return False
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
