@@ -188,7 +188,7 @@ class Solution:
         return self.status == "optimal"
 
 
-def solve_rows(prob, K, objective="effort", x0=None, maxiter=200):
+def solve_rows(prob, K, x0=None, maxiter=200):
     """Minimum effort over K rows into the terminal set (SLSQP, exact gradients); verified by simulation."""
     from scipy.optimize import minimize
 
