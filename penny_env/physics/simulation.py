@@ -39,6 +39,14 @@ class Trajectory:
     _seg_t: np.ndarray = field(repr=False, default=None)
     _seg_s: np.ndarray = field(repr=False, default=None)
     _seg_acc: np.ndarray = field(repr=False, default=None)
+    # simulate(..., sensitivities=True): see physics/sensitivity.py (None otherwise)
+    jacobian: np.ndarray | None = field(repr=False, default=None)
+    control_jacobian: np.ndarray | None = field(repr=False, default=None)
+    jacobian_valid: bool | None = None
+    jacobian_reason: str = ""
+    final_time_gradient: np.ndarray | None = field(repr=False, default=None)
+    final_time_control_gradient: np.ndarray | None = field(repr=False, default=None)
+    impact_normal_speeds: np.ndarray | None = field(repr=False, default=None)
 
     @property
     def n_impacts(self) -> int:
@@ -84,7 +92,8 @@ def _free_chunk(state, params, table):
 
 
 def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impacts=None,
-             controls=None, control_dt=None, settings: SolverSettings | None = None) -> Trajectory:
+             controls=None, control_dt=None, settings: SolverSettings | None = None,
+             sensitivities: bool = False) -> Trajectory:
     """Simulate the (controlled) bouncing penny exactly, impact by impact.
 
     state: (x, y, theta, phi, theta_dot, phi_dot). table: Ellipse/Circle/Stadium/ConvexTable or
@@ -95,11 +104,16 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     settings: SolverSettings. Work and memory are bounded: inputs beyond the documented limits
     (speeds, steering phase per interval, SolverSettings.max_impacts; docs/physics.md, Limits)
     raise a ValueError naming the field and the limit.
+    sensitivities: also return jacobian (d final_state / d state, 6 x 6) and, with controls,
+    control_jacobian (6 x 2K), exact through every impact; jacobian_valid False (NaN matrices,
+    jacobian_reason says why) where no derivative exists (physics/sensitivity.py).
     """
     params = check_params(params)
     table = check_table(table, params)
     law = make_law(law)
     settings = check_settings(settings)
+    if not isinstance(sensitivities, (bool, np.bool_)):
+        raise TypeError(f"sensitivities must be a bool, got {type(sensitivities).__name__}")
     s = as_state(state)
     u, cdt = check_controls(controls, control_dt)
     if t_final is not None:
@@ -224,9 +238,22 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             seg_acc.append((0.0, 0.0))  # set at the top of the loop
     S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
-    return Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
-                      final, float(t), np.array(rests), complete, params,
-                      np.array(seg_t), np.array(seg_s).reshape(-1, 6), np.array(seg_acc))
+    traj = Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
+                  final, float(t), np.array(rests), complete, params,
+                  np.array(seg_t), np.array(seg_s).reshape(-1, 6), np.array(seg_acc))
+    if sensitivities:
+        _attach_sensitivities(traj, table, law, u, n_impacts, t_final)
+    return traj
+
+
+def _attach_sensitivities(traj, table, law, controls, n_impacts, t_final):
+    from .sensitivity import trajectory_jacobians
+
+    sens = trajectory_jacobians(traj, table, law, controls, n_impacts, t_final)
+    traj.jacobian, traj.control_jacobian = sens.jacobian, sens.control_jacobian
+    traj.jacobian_valid, traj.jacobian_reason = sens.valid, sens.reason
+    traj.final_time_gradient, traj.final_time_control_gradient = sens.time_gradient, sens.control_time_gradient
+    traj.impact_normal_speeds = sens.normal_speeds
 
 
 def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
