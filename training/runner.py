@@ -92,7 +92,8 @@ def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out
             return True
 
         def _on_training_end(self):
-            if not self.rows or self.rows[-1][0] != self.num_timesteps:
+            # the final model, unless the last evaluation was just before (PPO ends on a rollout multiple)
+            if not self.rows or self.num_timesteps - self.rows[-1][0] >= every / 2:
                 self._evaluate()
 
     return SuccessEval()

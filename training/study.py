@@ -128,7 +128,7 @@ def run_job(job: dict, runs: str) -> dict:
     from training.runner import eval_seed, train_agent
     out = job_dir(runs, job)
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     curve = []
     if job["agent"] in ALGOS:
         model = train_agent(out, job["cell"], job["agent"], job["seed"], job["timesteps"], job["num_envs"],
@@ -142,7 +142,8 @@ def run_job(job: dict, runs: str) -> dict:
         policy = reference_policy(job["agent"], venv._core, job["seed"])
         venv.close()
     episodes = run_episodes(job["cell"], policy, job["eval_episodes"], eval_seed(job["seed"]))
-    return {"job": job, "episodes": episodes, "curve": curve, "seconds": time.perf_counter() - t0}
+    return {"job": job, "episodes": episodes, "curve": curve, "seconds": time.perf_counter() - t0,
+            "cpu_seconds": time.process_time() - c0}
 
 
 def _finish(runs, result):

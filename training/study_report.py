@@ -65,7 +65,7 @@ def cell_rows(groups) -> list[dict]:
         change = ""
         curves = [r["curve"] for r in results if r["curve"]]
         if curves and all(len(c) >= 2 for c in curves):
-            change = float(np.mean([c[-1][1] - c[-2][1] for c in curves]))
+            change = float(np.mean([c[-1][1] - c[round(0.75 * (len(c) - 1))][1] for c in curves]))
         rows.append({
             "probe": probe, "table": table, "cell": cell, "agent": agent, "seeds": len(results),
             "episodes": int(succ.size), "success": float(succ.mean()), "ci_low": lo, "ci_high": hi,
@@ -158,8 +158,9 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
         w.writeheader()
         w.writerows(rows)
     job_seconds = sum(r["seconds"] for res in groups.values() for r in res)
+    cpu_seconds = sum(r.get("cpu_seconds", 0.0) for res in groups.values() for r in res)
     lines = header("Does controllability of the penny need impacts? (RL study)", "training.study", list(argv))
-    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all, wall time of this "
+    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU), wall time of this "
               f"invocation {seconds:.0f} s. Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
               f"budgets {cfg['timesteps']} env steps. Probe tasks: [study_probes.md](study_probes.md).", ""]
     lines += ["## Proven (not observed)", "",
@@ -184,8 +185,8 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
               "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % two-level "
               "bootstrap interval (seeds, then episodes; 2000 resamples). time: mean time to success [s]. impact "
               "share: share of successful episodes with at least one impact. impacts/success: mean impacts in a "
-              "successful episode. last change: mean change of the eval success rate between the last two "
-              "points of the learning curve (near 0: flattened).", "",
+              "successful episode. last change: mean change of the eval success rate over the last quarter "
+              "of the learning curve (last point minus the point at 3/4 of training; near 0: flattened).", "",
               "| probe | table | agent | success [95 % CI] | time [s] | impact share | impacts/success | last change |",
               "| --- | --- | --- | --- | ---: | ---: | ---: | ---: |"]
     for r in rows:
