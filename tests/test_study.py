@@ -160,13 +160,16 @@ def test_quick_ray_same_rows_as_pool(quick_pool, tmp_path):
 
 
 @pytest.mark.slow
-def test_evaluate_run_dir_with_video(quick_pool):
+def test_evaluate_run_dir_with_video(quick_pool, tmp_path):
     pytest.importorskip("moviepy", reason="RecordVideo writes mp4 with moviepy")
     pytest.importorskip("pygame", reason="rgb_array rendering")
     from training.evaluate import main
     runs, _ = quick_pool
     run = runs / "PennyProbeDrive-Ellipse-Elastic-v0" / "ppo" / "seed0"
-    res = main([str(run), "--episodes", "8", "--video-episodes", "1"])
+    res = main([str(run), "--episodes", "8", "--video-episodes", "1", "--gif", str(tmp_path / "a.gif")])
     lo, hi = res["ci95_wilson"]
     assert lo <= res["success_rate"] <= hi and res["episodes"] == 8
     assert len(res["videos"]) == 1 and (run / "evaluation.json").is_file()
+    from PIL import Image
+    with Image.open(tmp_path / "a.gif") as im:
+        assert im.n_frames > 10
