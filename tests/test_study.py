@@ -173,3 +173,10 @@ def test_evaluate_run_dir_with_video(quick_pool, tmp_path):
     from PIL import Image
     with Image.open(tmp_path / "a.gif") as im:
         assert im.n_frames > 10
+
+
+def test_failed_jobs_are_named():
+    jobs = [{"cell": "PennyProbeDrive-Plane-v0", "agent": "ppo", "seed": 3}]
+    with pytest.raises(RuntimeError, match="PennyProbeDrive-Plane-v0 ppo seed 3: ValueError: boom"):
+        study._raise_failed(["0: ValueError: boom"], jobs)
+    study._raise_failed([], jobs)  # nothing failed: no error

@@ -159,8 +159,20 @@ def _pool(todo, runs, workers):
     from tqdm import tqdm
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
         futures = [ex.submit(run_job, job, str(runs)) for job in todo]
+        failed = []
         for fut in tqdm(as_completed(futures), total=len(futures), desc="jobs", unit="job"):
-            _finish(runs, fut.result())
+            try:
+                _finish(runs, fut.result())
+            except Exception as exc:  # keep the other jobs going; a rerun retries this one
+                failed.append(f"{futures.index(fut)}: {type(exc).__name__}: {exc}")
+    _raise_failed(failed, todo)
+
+
+def _raise_failed(failed, todo):
+    if failed:
+        lines = [f"  {todo[int(f.split(':')[0])]['cell']} {todo[int(f.split(':')[0])]['agent']} "
+                 f"seed {todo[int(f.split(':')[0])]['seed']}: {f.split(': ', 1)[1]}" for f in failed]
+        raise RuntimeError(f"{len(failed)} job(s) failed (the others are saved; rerun to retry):\n" + "\n".join(lines))
 
 
 def check_ray():
@@ -181,14 +193,20 @@ def _ray(todo, runs, workers):
         ray.init(address=address, log_to_driver=False)
     try:
         task = ray.remote(num_cpus=1)(run_job)
-        pending = [task.remote(job, str(runs)) for job in todo]
+        refs = [task.remote(job, str(runs)) for job in todo]
+        index = {r: i for i, r in enumerate(refs)}
+        pending, failed = list(refs), []
         with tqdm(total=len(pending), desc="jobs (ray)", unit="job") as bar:
             while pending:
                 done, pending = ray.wait(pending, num_returns=1)
-                _finish(runs, ray.get(done[0]))
+                try:
+                    _finish(runs, ray.get(done[0]))
+                except Exception as exc:  # a RayTaskError wraps the job's exception
+                    failed.append(f"{index[done[0]]}: {type(exc).__name__}: {exc}")
                 bar.update(1)
     finally:
         ray.shutdown()
+    _raise_failed(failed, todo)
 
 
 def main(argv=None):

@@ -181,6 +181,22 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
         if pr:
             v, why = verdict(pr)
             lines.append(f"| {probe} ({PROBES[probe]}) | **{v}** | {why} |")
+    lines += ["", "Impacts in the successes of the trained agents (PPO, SAC) on tables, and time to success on "
+              "the plane vs the tables (computed from the rows below):", ""]
+    for probe in PROBES:
+        rl = [r for r in rows if r["probe"] == probe and r["agent"] in ("ppo", "sac") and r["success"] > 0]
+        wall = [r for r in rl if r["table"] != "Plane"]
+        n_succ = sum(r["success"] * r["episodes"] for r in wall)
+        n_imp = sum(r["success"] * r["episodes"] * r["impact_share"] for r in wall)
+        plane_t = [r["mean_time_s"] for r in rl if r["table"] == "Plane"]
+        wall_t = [r["mean_time_s"] for r in wall]
+        if rl:
+            lines.append(f"- {probe}: {n_imp:.0f} of {n_succ:.0f} successful table episodes used an impact; mean time to "
+                         f"success {np.mean(plane_t):.2f} s on the plane" if plane_t else
+                         f"- {probe}: {n_imp:.0f} of {n_succ:.0f} successful table episodes used an impact; no success "
+                         f"on the plane")
+            if wall_t:
+                lines[-1] += f", {min(wall_t):.2f} to {max(wall_t):.2f} s on the tables (per cell and agent)"
     lines += ["", "## Observed, per cell", "",
               "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % two-level "
               "bootstrap interval (seeds, then episodes; 2000 resamples). time: mean time to success [s]. impact "
