@@ -18,7 +18,8 @@ IDS = env_ids()
 
 
 def test_ids_cover_tasks_scenes_laws_actuations():
-    assert 8 <= len(IDS) <= 12
+    # the study's probe ids (PennyProbe*, tests/test_study_probes.py) are a grid apart
+    assert 8 <= len([i for i in IDS if not i.startswith("PennyProbe")]) <= 12
     presets = env_presets()
     scenes, tasks, laws, acts = set(), set(), set(), set()
     for kw in presets.values():

@@ -19,8 +19,13 @@ def test_simulator_snippet_runs():
 
 def test_every_id_in_the_readme_is_registered_and_vice_versa():
     listed = set(re.findall(r"`(Penny[A-Za-z]+-[A-Za-z]+-v\d+)`", README))
-    registered = {k for k in gym.registry if k.startswith("Penny")}
+    registered = {k for k in gym.registry if k.startswith("Penny") and not k.startswith("PennyProbe")}
     assert listed == registered
+    # the study's probe grid is listed in docs/study_probes.md, which the README links
+    probes_doc = (Path(__file__).parent.parent / "docs" / "study_probes.md").read_text()
+    assert "docs/study_probes.md" in README
+    assert set(re.findall(r"`(PennyProbe[A-Za-z]+-[A-Za-z0-9-]+?-v\d+)`", probes_doc)) == {
+        k for k in gym.registry if k.startswith("PennyProbe")}
 
 
 def test_commands_in_the_readme_exist():

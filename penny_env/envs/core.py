@@ -25,6 +25,7 @@ _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 N_DRAWS = 8
+OFFSET_TRIES = 64  # target candidates per episode when task.heading_offset > 0
 
 
 def _mix(z):
@@ -83,6 +84,12 @@ class Core:
         self.f_spawn = scene.init["spawn_fraction"]
         self.f_target = task.target_fraction * fmax
         self.delta = 0.0 if self.plane else self.settings.contact_tol * self.table.size
+        self.heading_offset = task.heading_offset
+        if self.heading_offset > 0 and not self.heading_offset < self.f_target * min(ax, ay):
+            # any line through the spawn point leaves target points farther than the target
+            # ellipse's semi-minor axis, so below it the accepted region has positive area
+            raise ConfigError(f"task.heading_offset must be < target_fraction (1 - R / inradius) x the spawn "
+                              f"ellipse's semi-minor axis = {self.f_target * min(ax, ay):.6g} m, got {self.heading_offset!r}")
 
     def _backend(self, backend):
         """'numba' or 'numpy' (see physics.compiled.choose_backend)."""
@@ -131,7 +138,33 @@ class Core:
             rt = self.f_target * np.sqrt(u[6])
             target[0] = rt * self.ax * cb
             target[1] = rt * self.ay * sb
+            if self.heading_offset > 0:
+                self._offset_targets(keys, episodes, S, target)
         return S, target, arc
+
+    def _offset_targets(self, keys, episodes, S, target):
+        """Redraw, in place, the targets closer than task.heading_offset to the initial heading
+        line: the first of OFFSET_TRIES further candidates (draws N_DRAWS.. of the episode's
+        stream, so the draws above are unchanged) that is far enough, else the farthest one."""
+        c, s = np.cos(S[PHI]), np.sin(S[PHI])
+
+        def offset(tx, ty):
+            return np.abs((tx - S[X]) * s - (ty - S[Y]) * c)
+
+        best = offset(target[0], target[1])
+        u = uniforms(keys, episodes, N_DRAWS + 2 * OFFSET_TRIES)[N_DRAWS:]
+        for i in range(OFFSET_TRIES):
+            todo = best < self.heading_offset
+            if not todo.any():
+                break
+            rt = self.f_target * np.sqrt(u[2 * i])
+            b = 2.0 * np.pi * u[2 * i + 1] - np.pi
+            tx, ty = rt * self.ax * np.cos(b), rt * self.ay * np.sin(b)
+            d = offset(tx, ty)
+            take = todo & (d > best)
+            target[0] = np.where(take, tx, target[0])
+            target[1] = np.where(take, ty, target[1])
+            best = np.where(take, d, best)
 
     def _wall_radius(self, c, s):
         """Distance from the centre to the wall along (c, s) (the table's own wall_distance)."""

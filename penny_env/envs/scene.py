@@ -224,6 +224,9 @@ class Task:
     arc_half_width:    impacts: [rad] half-width of the marked arc (polar angle of the impact point
                        about the table's centre); >= pi marks the whole wall
     impacts_goal:      impacts: success after this many impacts on the arc
+    heading_offset:    reach, park: [m] minimum distance of the target from the initial heading
+                       line (the line through the start contact point along phi); 0 = no constraint.
+                       Targets are drawn by rejection (up to 64 candidates, then the farthest).
     """
 
     kind: str = "reach"
@@ -238,6 +241,7 @@ class Task:
     impact_reward: float = 1.0
     arc_half_width: float = 0.5
     impacts_goal: int = 10
+    heading_offset: float = 0.0
 
     def __post_init__(self):
         o = "task"
@@ -253,6 +257,7 @@ class Task:
         for name in ("progress_weight", "speed_cost", "ctrl_cost", "success_bonus", "impact_reward"):
             object.__setattr__(self, name, _num(o, name, getattr(self, name), nonneg=True))
         object.__setattr__(self, "arc_half_width", _num(o, "arc_half_width", self.arc_half_width, positive=True))
+        object.__setattr__(self, "heading_offset", _num(o, "heading_offset", self.heading_offset, nonneg=True))
 
 
 SCENE_FIELDS = tuple(f.name for f in fields(Scene))

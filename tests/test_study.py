@@ -1,0 +1,182 @@
+"""training.study, training.runner, training.evaluate: bad input fails before any training,
+the statistics and verdicts, --quick end to end (process pool and Ray give the same rows)."""
+import csv
+import json
+import shutil
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3", reason="the study trains SB3 agents")
+pytest.importorskip("torch", reason="SB3 needs torch")
+
+from training import study  # noqa: E402
+from training.study_report import bootstrap_ci, verdict  # noqa: E402
+from training.evaluate import wilson_interval  # noqa: E402
+
+QUICK = study.QUICK_CONFIG.read_text()
+
+
+def _cfg(tmp_path, text):
+    p = tmp_path / "study.yaml"
+    p.write_text(text)
+    return str(p)
+
+
+@pytest.mark.parametrize("old,new,match", [
+    ("agents: [ppo,", "agents: [ppo, dqn,", "unknown agent/algorithm 'dqn'"),
+    ("PennyProbeDrive-Plane-v0,", "PennyNoSuch-v0,", "unknown cell \\(env id\\) 'PennyNoSuch-v0'"),
+    ("n_epochs: 2,", "n_epochz: 2,", "unknown ppo hyperparameter\\(s\\) \\['n_epochz'\\]"),
+    ("seeds: [0, 1]", "seeds: [0, 1]\nbudget: 3", "unknown config key\\(s\\) \\['budget'\\]"),
+    ("seeds: [0, 1]", "seeds: [0, -1]", "seeds must be"),
+    ("timesteps: {ppo: 1024, sac: 256}", "timesteps: {ppo: 1024, sac: 256, a2c: 5}", "timesteps: unknown algorithm"),
+])
+def test_bad_config_named_before_training(tmp_path, capsys, old, new, match):
+    assert old in QUICK
+    path = _cfg(tmp_path, QUICK.replace(old, new))
+    with pytest.raises(ValueError, match=match):
+        study.load_config(path)
+    with pytest.raises(SystemExit):
+        study.main(["--config", path, "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "r.md")])
+    assert "error:" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()  # nothing started
+
+
+def test_ray_missing_is_named(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(SystemExit):
+        study.main(["--quick", "--ray", "--runs", str(tmp_path / "runs")])
+    assert "--ray needs Ray" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_quick_never_writes_docs(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        study.main(["--quick", "--runs", str(tmp_path / "runs"), "--out", str(study.ROOT / "docs" / "study.md")])
+    assert "never writes into docs/" in capsys.readouterr().err
+
+
+def test_missing_and_incompatible_model(tmp_path):
+    from training.runner import load_run, train_agent
+    from training.evaluate import evaluate_run
+    with pytest.raises(ValueError, match="config.json"):
+        evaluate_run(tmp_path)
+    run = tmp_path / "run"
+    train_agent(run, "PennyProbeDrive-Plane-v0", "ppo", 0, 64, 2, {"n_steps": 32, "batch_size": 64, "n_epochs": 1},
+                eval_points=1, eval_episodes=2, checkpoints=1)
+    for f in ("config.json", "model.zip", "progress.csv", "curve.csv"):
+        assert (run / f).is_file(), f
+    assert list(run.glob("events.out.tfevents.*")) and list((run / "checkpoints").glob("*.zip"))
+    cfg = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps(dict(cfg, env_id="PennyProbeBoth-Plane-v0")))  # 2 actions, model has 1
+    with pytest.raises(ValueError, match="incompatible with PennyProbeBoth-Plane-v0"):
+        load_run(run)
+    (run / "config.json").write_text(json.dumps(dict(cfg, algo="sac")))
+    with pytest.raises(ValueError, match="cannot be loaded as a sac model"):
+        load_run(run)
+    (run / "config.json").write_text(json.dumps(cfg))
+    (run / "model.zip").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="model.zip"):
+        load_run(run)
+    (run / "model.zip").unlink()
+    with pytest.raises(ValueError, match="missing model file"):
+        load_run(run)
+
+
+def test_bootstrap_interval_covers_and_shrinks():
+    rng = np.random.default_rng(1)
+    small = (rng.random((5, 20)) < 0.3).astype(float)
+    big = (rng.random((5, 400)) < 0.3).astype(float)
+    lo1, hi1 = bootstrap_ci(small)
+    lo2, hi2 = bootstrap_ci(big)
+    assert lo1 <= small.mean() <= hi1 and lo2 <= big.mean() <= hi2
+    assert hi2 - lo2 < hi1 - lo1
+    assert bootstrap_ci(np.zeros((5, 10))) == (0.0, 0.0)
+    # seeds that disagree widen the interval beyond the pooled binomial one
+    split = np.r_[np.ones((2, 100)), np.zeros((3, 100))]
+    lo, hi = bootstrap_ci(split)
+    assert hi - lo > 0.5
+
+
+def test_wilson_interval():
+    assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(0, 10)[1] == pytest.approx(0.2775, abs=1e-4)
+    lo, hi = wilson_interval(50, 100)
+    assert lo == pytest.approx(1 - hi) and lo < 0.5 < hi
+
+
+def _row(table, agent, s, lo, hi):
+    return {"table": table, "agent": agent, "success": s, "ci_low": lo, "ci_high": hi}
+
+
+def test_verdict_from_intervals():
+    needed = [_row("Plane", "ppo", 0.0, 0.0, 0.0), _row("Ellipse-Plastic", "sac", 0.4, 0.3, 0.5),
+              _row("Ellipse-Elastic", "ppo", 0.05, 0.0, 0.1)]
+    assert verdict(needed)[0] == "impacts needed"
+    not_needed = [_row("Plane", "feedback", 1.0, 1.0, 1.0), _row("Ellipse-Elastic", "feedback", 1.0, 1.0, 1.0)]
+    assert verdict(not_needed)[0] == "impacts not needed"
+    unsolved = [_row("Plane", "ppo", 0.0, 0.0, 0.0), _row("Stadium-E05", "ppo", 0.02, 0.0, 0.06)]
+    assert verdict(unsolved)[0] == "inconclusive"
+    assert verdict([_row("Plane", "ppo", 0.5, 0.4, 0.6)])[0] == "inconclusive"
+
+
+@pytest.fixture(scope="module")
+def quick_pool(tmp_path_factory):
+    runs = tmp_path_factory.mktemp("quick_pool")
+    out = study.main(["--quick", "--runs", str(runs), "--workers", "2"])
+    return runs, out
+
+
+@pytest.mark.slow
+def test_quick_end_to_end(quick_pool, capsys):
+    runs, out = quick_pool
+    assert out == runs / "study.md"
+    text = out.read_text()
+    cfg = study.load_config(study.QUICK_CONFIG)
+    jobs = study.make_jobs(cfg)
+    assert len(jobs) == 3 * 4 * 2 + 2  # feedback only on the both-controls cell
+    with open(out.with_suffix(".csv")) as f:
+        rows = list(csv.DictReader(f))
+    assert {(r["cell"], r["agent"]) for r in rows} == {(j["cell"], j["agent"]) for j in jobs}
+    assert all(int(r["seeds"]) == 2 and int(r["episodes"]) == 32 for r in rows)
+    # the plane's invariant: drive only never reaches a target off the heading line
+    assert all(float(r["success"]) == 0.0 for r in rows if r["cell"] == "PennyProbeDrive-Plane-v0")
+    fb = [r for r in rows if r["agent"] == "feedback"]
+    assert fb and float(fb[0]["success"]) > 0.8
+    assert "| Drive (" in text and "| Both (" in text and "## Proven" in text
+    assert (runs / "study_curves_drive.png").is_file() and (runs / "study_curves_both.png").is_file()
+    # a rerun skips the finished jobs
+    capsys.readouterr()
+    study.main(["--quick", "--runs", str(runs), "--workers", "2"])
+    assert f"{len(jobs)} jobs, {len(jobs)} already finished" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_quick_ray_same_rows_as_pool(quick_pool, tmp_path):
+    pytest.importorskip("ray", reason="--ray needs ray")
+    runs, out = quick_pool
+    ray_out = study.main(["--quick", "--ray", "--runs", str(tmp_path), "--workers", "2"])
+    assert ray_out.with_suffix(".csv").read_text() == out.with_suffix(".csv").read_text()
+
+
+@pytest.mark.slow
+def test_evaluate_run_dir_with_video(quick_pool, tmp_path):
+    pytest.importorskip("moviepy", reason="RecordVideo writes mp4 with moviepy")
+    pytest.importorskip("pygame", reason="rgb_array rendering")
+    from training.evaluate import main
+    runs, _ = quick_pool
+    run = runs / "PennyProbeDrive-Ellipse-Elastic-v0" / "ppo" / "seed0"
+    res = main([str(run), "--episodes", "8", "--video-episodes", "1", "--gif", str(tmp_path / "a.gif")])
+    lo, hi = res["ci95_wilson"]
+    assert lo <= res["success_rate"] <= hi and res["episodes"] == 8
+    assert len(res["videos"]) == 1 and (run / "evaluation.json").is_file()
+    from PIL import Image
+    with Image.open(tmp_path / "a.gif") as im:
+        assert im.n_frames > 10
+
+
+def test_failed_jobs_are_named():
+    jobs = [{"cell": "PennyProbeDrive-Plane-v0", "agent": "ppo", "seed": 3}]
+    with pytest.raises(RuntimeError, match="PennyProbeDrive-Plane-v0 ppo seed 3: ValueError: boom"):
+        study._raise_failed(["0: ValueError: boom"], jobs)
+    study._raise_failed([], jobs)  # nothing failed: no error

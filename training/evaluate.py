@@ -1,0 +1,107 @@
+"""Evaluate a saved run: success rate with its 95 % interval, and a video of a few episodes.
+
+    python -m training.evaluate RUN_DIR [--episodes 100] [--seed S] [--video-episodes 3] [--no-video] [--gif PATH]
+
+RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip; every
+(cell, agent, seed) folder of training.study for PPO/SAC). Episodes are deterministic-policy
+episodes on fresh seeds (default: the run's evaluation seeds). The interval is Wilson's score
+interval for a binomial proportion. Videos (gymnasium RecordVideo, needs moviepy and pygame)
+go to RUN_DIR/videos/; results to RUN_DIR/evaluation.json. --gif writes the first video episode as
+an animated GIF too (Pillow, every other frame), e.g. for the docs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion k / n."""
+    if n <= 0:
+        raise ValueError(f"n must be positive, got {n}")
+    p = k / n
+    den = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def record_video(env_id: str, model, folder: Path, episodes: int, seed: int, gif: Path | None = None) -> list[str]:
+    import gymnasium as gym
+    from gymnasium.wrappers import RecordVideo
+    import penny_env  # noqa: F401
+    env = RecordVideo(gym.make(env_id, render_mode="rgb_array"), str(folder), episode_trigger=lambda e: True,
+                      name_prefix="episode", disable_logger=True)
+    fps = env.metadata.get("render_fps", 20)
+    frames = []
+    for e in range(episodes):
+        obs, _ = env.reset(seed=seed + e)
+        done = False
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, term, trunc, _ = env.step(action)
+            done = term or trunc
+            if gif is not None and e == 0:
+                frames.append(env.unwrapped.render())
+    env.close()
+    if gif is not None:
+        from PIL import Image
+        images = [Image.fromarray(f) for f in frames[::2]]
+        Path(gif).parent.mkdir(parents=True, exist_ok=True)
+        images[0].save(gif, save_all=True, append_images=images[1:], duration=int(2000 / fps), loop=0)
+    return sorted(str(p) for p in folder.glob("*.mp4"))
+
+
+def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_episodes: int = 3,
+                 gif: str | None = None) -> dict:
+    from training.episodes import run_episodes
+    from training.runner import eval_seed, load_run
+    run_dir = Path(run_dir)
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    cfg, model = load_run(run_dir)
+    seed = eval_seed(cfg["seed"]) if seed is None else seed
+    r = run_episodes(cfg["env_id"], lambda o: model.predict(o, deterministic=True)[0], episodes, seed)
+    k = int(np.sum(r["success"]))
+    lo, hi = wilson_interval(k, episodes)
+    res = {"env_id": cfg["env_id"], "algo": cfg["algo"], "episodes": episodes, "seed": seed, "successes": k,
+           "success_rate": k / episodes, "ci95_wilson": [lo, hi], "mean_return": float(np.mean(r["return"])),
+           "mean_impacts": float(np.mean(r["impacts"]))}
+    if video_episodes > 0:
+        res["videos"] = record_video(cfg["env_id"], model, run_dir / "videos", video_episodes, seed,
+                                     Path(gif) if gif else None)
+        if gif:
+            res["gif"] = str(gif)
+    (run_dir / "evaluation.json").write_text(json.dumps(res, indent=2))
+    return res
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run_dir")
+    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=None)
+    ap.add_argument("--video-episodes", type=int, default=3)
+    ap.add_argument("--no-video", action="store_true")
+    ap.add_argument("--gif", default=None, help="also write the first video episode as an animated GIF here")
+    args = ap.parse_args(argv)
+    try:
+        res = evaluate_run(args.run_dir, args.episodes, args.seed, 0 if args.no_video else args.video_episodes,
+                           args.gif)
+    except ValueError as exc:
+        ap.error(str(exc))
+    lo, hi = res["ci95_wilson"]
+    print(f"{res['algo'].upper()} on {res['env_id']}: success {res['success_rate']:.3f} "
+          f"(95 % Wilson interval [{lo:.3f}, {hi:.3f}]) over {res['episodes']} episodes from seed {res['seed']}; "
+          f"mean return {res['mean_return']:.2f}")
+    for v in res.get("videos", []) + ([res["gif"]] if "gif" in res else []):
+        print("video:", v)
+    return res
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,219 @@
+"""The study's report from the jobs' result files: per (cell, agent) statistics with 95 %
+intervals, learning curves with bands (PNG), a verdict per probe computed from the intervals,
+and the proven facts kept apart from the observations.
+
+Interval method: a two-level (hierarchical) percentile bootstrap, 2000 resamples, fixed rng seed:
+resample the seeds with replacement, then the evaluation episodes within each drawn seed; the
+statistic is the mean over all drawn episodes. Learning-curve bands: percentile bootstrap over seeds.
+"""
+from __future__ import annotations
+
+import csv
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+B = 2000
+PROBES = {"Steer": "steer only, park", "Drive": "drive only, reach off the heading line", "Both": "both controls, park"}
+ROW_FIELDS = ["probe", "table", "cell", "agent", "seeds", "episodes", "success", "ci_low", "ci_high",
+              "mean_time_s", "impact_share", "impacts_per_success", "curve_last_change"]
+
+
+def bootstrap_ci(M: np.ndarray, seed: int = 0) -> tuple[float, float]:
+    """95 % two-level bootstrap interval of the mean of M (seeds x episodes)."""
+    M = np.asarray(M, float)
+    S, E = M.shape
+    rng = np.random.default_rng(seed)
+    si = rng.integers(0, S, (B, S))
+    ei = rng.integers(0, E, (B, S, E))
+    stats = M[si[:, :, None], ei].mean(axis=(1, 2))
+    lo, hi = np.percentile(stats, [2.5, 97.5])
+    return float(lo), float(hi)
+
+
+def split_cell(cell: str) -> tuple[str, str]:
+    """('Steer', 'Ellipse-Plastic') from 'PennyProbeSteer-Ellipse-Plastic-v0' (other ids: ('-', id))."""
+    if cell.startswith("PennyProbe") and cell.endswith("-v0"):
+        probe, table = cell[len("PennyProbe"):-3].split("-", 1)
+        return probe, table
+    return "-", cell
+
+
+def load_results(jobs, runs) -> dict:
+    from training.study import job_dir
+    groups = defaultdict(list)
+    for job in jobs:
+        path = job_dir(runs, job) / "result.json"
+        if not path.is_file():
+            raise ValueError(f"missing job result {path} (rerun the study to finish it)")
+        groups[(job["cell"], job["agent"])].append(json.loads(path.read_text()))
+    return groups
+
+
+def cell_rows(groups) -> list[dict]:
+    rows = []
+    for (cell, agent), results in groups.items():
+        results = sorted(results, key=lambda r: r["job"]["seed"])
+        succ = np.array([r["episodes"]["success"] for r in results], float)
+        time_ = np.array([r["episodes"]["time"] for r in results], float)
+        imp = np.array([r["episodes"]["impacts"] for r in results], float)
+        ok = succ > 0
+        lo, hi = bootstrap_ci(succ)
+        probe, table = split_cell(cell)
+        change = ""
+        curves = [r["curve"] for r in results if r["curve"]]
+        if curves and all(len(c) >= 2 for c in curves):
+            change = float(np.mean([c[-1][1] - c[round(0.75 * (len(c) - 1))][1] for c in curves]))
+        rows.append({
+            "probe": probe, "table": table, "cell": cell, "agent": agent, "seeds": len(results),
+            "episodes": int(succ.size), "success": float(succ.mean()), "ci_low": lo, "ci_high": hi,
+            "mean_time_s": float(time_[ok].mean()) if ok.any() else "",
+            "impact_share": float((imp[ok] > 0).mean()) if ok.any() else "",
+            "impacts_per_success": float(imp[ok].mean()) if ok.any() else "",
+            "curve_last_change": change})
+    rows.sort(key=lambda r: (r["probe"], r["table"] != "Plane", r["table"], r["agent"]))
+    return rows
+
+
+def verdict(rows_of_probe: list[dict]) -> tuple[str, str]:
+    """(verdict, reason) from the best agent (highest success) of each cell of one probe.
+
+    impacts needed: the best wall cell's interval lies above the plane's (lower > plane's upper);
+    not needed: the plane is solved (its lower bound > 0) and no wall cell lies above it;
+    inconclusive: otherwise (e.g. no agent solves any cell, or no plane cell)."""
+    best = {}
+    for r in rows_of_probe:
+        if r["table"] not in best or r["success"] > best[r["table"]]["success"]:
+            best[r["table"]] = r
+    plane = best.get("Plane")
+    walls = [r for t, r in best.items() if t != "Plane"]
+    if plane is None or not walls:
+        return "inconclusive", "needs the plane and at least one table"
+    top = max(walls, key=lambda r: r["ci_low"])
+    p = f"plane: {plane['agent']} {plane['success']:.2f} [{plane['ci_low']:.2f}, {plane['ci_high']:.2f}]"
+    w = f"best table {top['table']}: {top['agent']} {top['success']:.2f} [{top['ci_low']:.2f}, {top['ci_high']:.2f}]"
+    if top["ci_low"] > plane["ci_high"]:
+        return "impacts needed", f"{w} lies above the {p}"
+    if plane["ci_low"] > 0:
+        return "impacts not needed", f"the {p} is solved and the {w} does not lie above it"
+    return "inconclusive", f"{p}; {w}: no interval separates them and the plane is not shown solved"
+
+
+def plot_curves(groups, path: Path, probe: str) -> bool:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    cells = sorted({c for (c, a) in groups if split_cell(c)[0] == probe and a in ("ppo", "sac")},
+                   key=lambda c: (split_cell(c)[1] != "Plane", c))
+    if not cells:
+        return False
+    n = len(cells)
+    cols = min(4, n)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False, sharey=True)
+    rng = np.random.default_rng(0)
+    for ax, cell in zip(axes.flat, cells):
+        for agent, color in (("ppo", "C0"), ("sac", "C1")):
+            res = groups.get((cell, agent))
+            if not res:
+                continue
+            k = min(len(r["curve"]) for r in res)
+            if k == 0:
+                continue
+            x = np.array([r["curve"][:k] for r in res])  # seeds x points x (t, success)
+            t, y = x[0, :, 0], x[:, :, 1]
+            boot = y[rng.integers(0, len(y), (B, len(y)))].mean(axis=1)
+            lo, hi = np.percentile(boot, [2.5, 97.5], axis=0)
+            ax.plot(t, y.mean(0), color=color, label=agent.upper())
+            ax.fill_between(t, lo, hi, color=color, alpha=0.25)
+        ax.set_title(split_cell(cell)[1], fontsize=9)
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_xlabel("env steps", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    axes[0, 0].set_ylabel("eval success rate")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"{probe}: {PROBES.get(probe, probe)} (mean over seeds, 95 % bootstrap band)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return True
+
+
+def _fmt(v, spec=".2f"):
+    return format(v, spec) if isinstance(v, float) else str(v)
+
+
+def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
+    from penny_env.analysis.common import header
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    groups = load_results(jobs, runs)
+    rows = cell_rows(groups)
+    with open(out.with_suffix(".csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=ROW_FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+    job_seconds = sum(r["seconds"] for res in groups.values() for r in res)
+    cpu_seconds = sum(r.get("cpu_seconds", 0.0) for res in groups.values() for r in res)
+    lines = header("Does controllability of the penny need impacts? (RL study)", "training.study", list(argv))
+    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU), wall time of this "
+              f"invocation {seconds:.0f} s. Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
+              f"budgets {cfg['timesteps']} env steps. Probe tasks: [study_probes.md](study_probes.md).", ""]
+    lines += ["## Proven (not observed)", "",
+              "- On the open plane with u2 = 0 (steer only), (I + m R^2) theta'' = 0: theta_dot is conserved, so the "
+              "steer probe's start (|R theta_dot| >= 0.03 m/s > the 0.01 m/s speed tolerance) can never come to rest.",
+              "- On the open plane with u1 = 0 (drive only), J phi'' = 0: from phi_dot = 0 the heading never turns and "
+              "the contact point stays on its initial heading line; the drive probe's targets lie >= 3 cm off it "
+              "(tolerance 1.5 cm), so they are unreachable.",
+              "- Both hold between impacts on any table; only an impact can change theta_dot (steer) or phi_dot (drive).",
+              "- With both controls the plane is controllable (the feedback controller below is one witness).", ""]
+    lines += ["## Verdicts (computed from the intervals)", "",
+              "Rule: the best agent (highest success) per cell; **impacts needed** when the best table cell's 95 % "
+              "interval lies above the plane's; **not needed** when the plane is solved (lower bound > 0) and no "
+              "table lies above it; else **inconclusive**.", "",
+              "| probe | verdict | because |", "| --- | --- | --- |"]
+    for probe in PROBES:
+        pr = [r for r in rows if r["probe"] == probe]
+        if pr:
+            v, why = verdict(pr)
+            lines.append(f"| {probe} ({PROBES[probe]}) | **{v}** | {why} |")
+    lines += ["", "Impacts in the successes of the trained agents (PPO, SAC) on tables, and time to success on "
+              "the plane vs the tables (computed from the rows below):", ""]
+    for probe in PROBES:
+        rl = [r for r in rows if r["probe"] == probe and r["agent"] in ("ppo", "sac") and r["success"] > 0]
+        wall = [r for r in rl if r["table"] != "Plane"]
+        n_succ = sum(r["success"] * r["episodes"] for r in wall)
+        n_imp = sum(r["success"] * r["episodes"] * r["impact_share"] for r in wall)
+        plane_t = [r["mean_time_s"] for r in rl if r["table"] == "Plane"]
+        wall_t = [r["mean_time_s"] for r in wall]
+        if rl:
+            lines.append(f"- {probe}: {n_imp:.0f} of {n_succ:.0f} successful table episodes used an impact; mean time to "
+                         f"success {np.mean(plane_t):.2f} s on the plane" if plane_t else
+                         f"- {probe}: {n_imp:.0f} of {n_succ:.0f} successful table episodes used an impact; no success "
+                         f"on the plane")
+            if wall_t:
+                lines[-1] += f", {min(wall_t):.2f} to {max(wall_t):.2f} s on the tables (per cell and agent)"
+    lines += ["", "## Observed, per cell", "",
+              "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % two-level "
+              "bootstrap interval (seeds, then episodes; 2000 resamples). time: mean time to success [s]. impact "
+              "share: share of successful episodes with at least one impact. impacts/success: mean impacts in a "
+              "successful episode. last change: mean change of the eval success rate over the last quarter "
+              "of the learning curve (last point minus the point at 3/4 of training; near 0: flattened).", "",
+              "| probe | table | agent | success [95 % CI] | time [s] | impact share | impacts/success | last change |",
+              "| --- | --- | --- | --- | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        lines.append(f"| {r['probe']} | {r['table']} | {r['agent']} | {r['success']:.2f} [{r['ci_low']:.2f}, "
+                     f"{r['ci_high']:.2f}] | {_fmt(r['mean_time_s'])} | {_fmt(r['impact_share'])} | "
+                     f"{_fmt(r['impacts_per_success'], '.1f')} | {_fmt(r['curve_last_change'], '+.2f')} |")
+    lines += ["", "## Learning curves", ""]
+    for probe in PROBES:
+        png = out.with_name(f"{out.stem}_curves_{probe.lower()}.png")
+        if plot_curves(groups, png, probe):
+            lines.append(f"![{probe}]({png.name})")
+    lines.append("")
+    out.write_text("\n".join(lines))
+    return rows
