@@ -106,11 +106,6 @@ def initial_observation(obs, s, tx, ty, p):
     return trig
 
 
-def kinetic_energy(s, p):
-    """Kinetic energy [J] of state s (rolling plus spinning)."""
-    return 0.5 * (p.Itot * s[4] ** 2 + p.J * s[5] ** 2)
-
-
 def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends):
     """(new state, impacts, arc impacts) of the penny over one control period; c_ph, s_ph: cos and
     sin of the heading s[3]. The first len(times) impacts' times (since the period's start) and
@@ -147,8 +142,8 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     """One step of one env: clip the actions (a1 unused with one control), advance the penny,
     count the arc impacts, reward, termination and truncation, and write the observation into obs.
 
-    Returns (state, trig, impacts, count, distance, reward, terminated, truncated, kinetic energy)
-    with count the running arc-impact count and trig angle_trig(state)."""
+    Returns (state, trig, impacts, count, distance, reward, terminated, truncated) with count the
+    running arc-impact count and trig angle_trig(state)."""
     a0 = clip_action(a0)
     if p.n_act == 2:
         a1 = clip_action(a1)
@@ -164,14 +159,14 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     r, success = step_reward(k, d_prev, d, s1[4], ctrl, n_arc, count, XP)
     trig1 = angle_trig(s1)
     observe(obs, s1, trig1, tx, ty, count, p)
-    return s1, trig1, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps, kinetic_energy(s1, p)
+    return s1, trig1, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps
 
 
 def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, m, k,
-              obs, rew, term, trunc, n_imp, times, ends, ke):
+              obs, rew, term, trunc, n_imp, times, ends):
     """env_step over every env i not in skip (in parallel when compiled), in place: S (6, N),
     trig (4, N), count, dist, steps and time advance; obs, rew, term, trunc, n_imp, times (N, K)
-    (NaN-padded), ends (N, K) (0-padded) and ke receive the step's results. Skipped envs (they reset
+    (NaN-padded) and ends (N, K) (0-padded) receive the step's results. Skipped envs (they reset
     at this step, NEXT_STEP autoreset) keep their state and get zero rewards and no flags."""
     for i in prange(S.shape[1]):
         for j in range(times.shape[1]):
@@ -186,7 +181,7 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
         s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
         tr = (trig[0, i], trig[1, i], trig[2, i], trig[3, i])
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
-        s1, tr1, n, c, d, r, te, tu, e = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
+        s1, tr1, n, c, d, r, te, tu = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
                                                   arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m, k,
                                                   obs[i], times[i], ends[i])
         for row in range(6):
@@ -201,18 +196,16 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
         rew[i] = r
         term[i] = te
         trunc[i] = tu
-        ke[i] = e
 
 
-def observe_rows(rows, S, trig, target, count, p, obs, ke):
-    """trig, obs and ke of the envs in rows (after their reset)."""
+def observe_rows(rows, S, trig, target, count, p, obs):
+    """trig and obs of the envs in rows (after their reset)."""
     for i in rows:
         s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
         tr = angle_trig(s)
         for row in range(4):
             trig[row, i] = tr[row]
         observe(obs[i], s, tr, target[0, i], target[1, i], count[i], p)
-        ke[i] = kinetic_energy(s, p)
 
 
 PYTHON_FUNCTIONS = {"env_step": env_step, "step_envs": step_envs, "observe_rows": observe_rows,
@@ -243,7 +236,7 @@ def compiled_env_functions() -> dict:
         namespace[name] = phys[name]
     for f in (tasks.on_arc, tasks.step_reward):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    for f in (clip_action, observe, angle_trig, kinetic_energy, transition):
+    for f in (clip_action, observe, angle_trig, transition):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
     single = compiled.jit_copy(env_step, namespace, jit)
     # inlined into the parallel loop: called there as a function, its many arguments cost more than its work

@@ -208,14 +208,14 @@ class PennyEnv(gym.Env):
         if n_imp > self._times.shape[0]:  # more impacts than the buffer holds: the same pure step, a larger buffer
             self._times, self._ends = np.empty(n_imp), np.empty(n_imp, dtype=np.int64)
             out = self._fns["env_step"](*args, self._times, self._ends)
-        s, self._trig, n_imp, self._count, d, reward, terminated, truncated, energy = out
+        s, self._trig, n_imp, self._count, d, reward, terminated, truncated = out
         self._s = s
         self._d = d
         self._steps += 1
         self._t += c.dt
         info = {"impacts": n_imp, "impact_times": tuple(self._times[:n_imp].tolist()),
                 "impact_ends": tuple(self._ends[:n_imp].tolist()),
-                "kinetic_energy": energy, "time": self._t, "distance": d, "is_success": terminated}
+                "kinetic_energy": self._energy(), "time": self._t, "distance": d, "is_success": terminated}
         if c.impacts:
             info["arc_impacts"] = self._count
         if terminated or truncated:

@@ -8,6 +8,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..physics import kinetic_energy
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys, X, Y
 from .functional import env_functions, env_params
@@ -148,12 +149,11 @@ class PennyVectorEnv(VectorEnv):
         trig = np.zeros((4, 1))
         obs = np.empty((1, c.obs_dim), dtype=np.float32)
         ints = lambda: np.zeros(1, dtype=np.int64)  # noqa: E731
-        self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S, trig, np.zeros((2, 1)), ints(), self._p, obs,
-                                  np.zeros(1))
+        self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S, trig, np.zeros((2, 1)), ints(), self._p, obs)
         self._fns["step_envs"](S, trig, np.zeros((1, 2)), np.zeros(1, dtype=bool), np.zeros((2, 1)), np.zeros((2, 1)),
                                ints(), np.zeros(1), ints(), np.zeros(1), self._p, self._m, c.k, obs, np.zeros(1),
                                np.zeros(1, dtype=bool), np.zeros(1, dtype=bool), ints(),
-                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8), np.zeros(1))
+                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8))
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -205,18 +205,17 @@ class PennyVectorEnv(VectorEnv):
             self._t = np.zeros(n)
             self._trig = np.zeros((4, n))  # cos/sin of theta and phi of self._S (the certificate uses them)
             self._d = np.zeros(n)
-            self._ke = np.zeros(n)
             self._obs = np.zeros((n, c.obs_dim), dtype=np.float32)
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         rows = self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
-        self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._p, self._obs, self._ke)
-        info = {"kinetic_energy": self._ke.copy(), "_kinetic_energy": self._true.copy(),
+        self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._p, self._obs)
+        info = {"kinetic_energy": kinetic_energy(self._S, c.params), "_kinetic_energy": self._true.copy(),
                 "time": self._t.copy(), "_time": self._true.copy(), "distance": self._d.copy(), "_distance": self._true.copy()}
         return self._obs.copy(), info
 
     def _reset_envs(self, mask, states=None, targets=None):
-        """Draw the next episode of the envs in mask (their trig, obs and energy: observe_rows)."""
+        """Draw the next episode of the envs in mask (their trig and obs: observe_rows); returns their indices."""
         idx = np.flatnonzero(mask)
         if idx.size == 0:
             return idx
@@ -256,13 +255,13 @@ class PennyVectorEnv(VectorEnv):
         ends = np.empty((n, K), dtype=np.int8)
         self._fns["step_envs"](self._S, self._trig, a, skip, self._target, self._arc, self._count, self._d,
                                self._steps, self._t, self._p, self._m, c.k, obs, rew, term, trunc, n_imp,
-                               times, ends, self._ke)
+                               times, ends)
         self._extend_trails()
         done = term | trunc
         if next_step and skip.any():  # the envs whose episode ended at the previous step reset now
             self._episodes[skip] += np.uint64(1)
             self._fns["observe_rows"](self._reset_envs(skip), self._S, self._trig, self._target, self._count,
-                                      self._p, obs, self._ke)
+                                      self._p, obs)
         info = self._info(n_imp, times, ends, term)
         if next_step:
             self._autoreset = done
@@ -284,7 +283,7 @@ class PennyVectorEnv(VectorEnv):
         info["final_info"], info["_final_info"] = final_info, done.copy()
         self._episodes[done] += np.uint64(1)
         self._fns["observe_rows"](self._reset_envs(done), self._S, self._trig, self._target, self._count, self._p,
-                                  obs, self._ke)
+                                  obs)
 
     def _extend_trails(self):
         if self._trails is not None:
@@ -295,7 +294,7 @@ class PennyVectorEnv(VectorEnv):
     def _info(self, counts, times, ends, success):
         t = self._true
         info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
-                "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": self._ke.copy(),
+                "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": kinetic_energy(self._S, self._core.params),
                 "_kinetic_energy": t.copy(), "time": self._t.copy(), "_time": t.copy(), "distance": self._d.copy(),
                 "_distance": t.copy(), "is_success": success.copy(), "_is_success": t.copy()}
         if self._core.impacts:
