@@ -210,8 +210,9 @@ class PennyVectorEnv(VectorEnv):
         rows = self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
         self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._p, self._obs)
-        info = {"kinetic_energy": kinetic_energy(self._S, c.params), "_kinetic_energy": self._true.copy(),
-                "time": self._t.copy(), "_time": self._true.copy(), "distance": self._d.copy(), "_distance": self._true.copy()}
+        K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
+        info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
+                          np.zeros(n, dtype=bool))
         return self._obs.copy(), info
 
     def _reset_envs(self, mask, states=None, targets=None):
