@@ -90,8 +90,11 @@ class Core:
             raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
         if backend == "python":
             return "python"
-        chosen = "numba" if choose_backend(backend, self.params, self.table, self.law, self.settings,
-                                           "scene.table") == "numba" else "python"
+        try:
+            chosen = "numba" if choose_backend(backend, self.params, self.table, self.law, self.settings,
+                                               "scene.table") == "numba" else "python"
+        except ValueError as err:  # (the batch's wording names its own plain backend)
+            raise ValueError(str(err).replace("backend='numpy'", "backend='python'")) from None
         if chosen == "python":
             import warnings
             warnings.warn("penny_env: the compiled step cannot run here (numba missing or a table that does not "

@@ -29,17 +29,21 @@ class PennyEnv(gym.Env):
     found and processed). The open plane (table kind "none") is the non-hybrid penny.
 
     **Configuration.** ``PennyEnv(scene="ellipse", task="reach", render_mode=None, backend="auto",
-    **overrides)``: scene and task are preset names (``penny_env/presets/scenes/*.yaml``,
-    ``penny_env/presets/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` / ``Task``
-    objects; keyword overrides set any field of either (see their docstrings); an unknown or
-    invalid field raises a ``ConfigError`` (a ``ValueError``) naming it. backend: "numba" runs the
-    physics' scalar event loop compiled (the optional numba, ``pip install "penny_env[fast]"``),
-    "numpy" runs it as plain Python floats; "auto" (default) takes numba where it is installed
-    and the table compiles (the built-in tables). Both give bitwise the same episodes (tested).
+    truncate=True, **overrides)``: scene and task are preset names (``penny_env/presets/scenes/*.yaml``,
+    ``penny_env/presets/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` /
+    ``Task`` objects; keyword overrides set any field of either (see their docstrings); an unknown
+    keyword raises ``UnknownFieldError`` (a ``ConfigError`` and a ``TypeError``), an invalid value a
+    ``ConfigError`` (a ``ValueError``), naming the field. The step is envs/functional.py's
+    ``env_step`` (the one PennyVectorEnv runs for each of its envs). backend: "numba" runs it
+    compiled, "python" as plain Python (debugging; bitwise the same episodes, tested); "auto"
+    (default) takes numba unless the table does not compile. truncate: False leaves truncation to a
+    wrapper (the registered ids: gymnasium's TimeLimit, so ``gymnasium.make(id, max_episode_steps=N)``
+    is honoured both ways).
 
     **Action space** ``Box(-1, 1, (k,), float32)``, one entry per actuated control, held
     constant over ``control_dt`` seconds; entries are clipped to [-1, 1], then scaled to the
-    torque limits. Non-finite entries or a wrong shape raise ``ValueError``.
+    torque limits. A wrong type (strings, None, bools, complex numbers) raises ``TypeError``,
+    non-finite entries or a wrong shape ``ValueError``.
 
     =========  ========================  =======================================
     actuation  action                    torques
@@ -77,20 +81,33 @@ class PennyEnv(gym.Env):
       the table's centre) of the arc's centre direction, drawn each episode.
 
     **Episode end.** Terminated on success (the conditions above). Truncated after the task's
-    ``max_episode_steps`` (the env truncates itself; the registered ids also carry it as
-    ``max_episode_steps``). ``info["is_success"]`` is set on the last step of an episode.
+    ``max_episode_steps`` (``truncate=True``, direct construction) or by gymnasium's TimeLimit
+    (the registered ids; ``gymnasium.make(id, max_episode_steps=N)``). ``info["is_success"]`` is in
+    every step's info (True on the step that succeeds), so every episode end carries it.
 
     **Starting state.** The contact point is uniform in ``init.spawn_fraction`` times the table's
     spawn ellipse (the ellipse itself, the circle, or the stadium's inscribed ellipse), theta,
     phi, theta_dot and phi_dot uniform in their ``init`` ranges; targets are uniform in
     ``target_fraction (1 - R / inradius)`` times the spawn ellipse (reachable by the contact
     point). ``reset(options={"state": (x, y, theta, phi, theta_dot, phi_dot), "target": (tx, ty)})``
-    sets them explicitly.
+    sets them explicitly, checked as the scene's fields: the state finite with both ends of the
+    penny inside the table, the target finite and where some heading fits the penny (the region
+    its contact point can reach); the impacts task's target (the arc) cannot be set.
 
-    **info** of every step: ``impacts`` (count inside the step), ``impact_times`` (tuple of times
-    since the step's start [s]), ``impact_ends`` (tuple of +1 front / -1 back; tuples so that
-    gymnasium's SyncVectorEnv can batch infos of different lengths), ``kinetic_energy`` [J], ``time`` (simulated
-    time since reset [s]), ``distance`` [m]; impacts task: ``arc_impacts`` (running count).
+    **info** of every step:
+
+    ==================  ==========================================================================
+    key                 value
+    ==================  ==========================================================================
+    ``impacts``         count of impacts inside the step
+    ``impact_times``    tuple of every impact's time since the step's start [s]
+    ``impact_ends``     tuple of +1 (front end) / -1 (back end)
+    ``kinetic_energy``  [J] after the step
+    ``time``            simulated time since reset [s]
+    ``distance``        contact point to target [m]
+    ``is_success``      the task's success condition on this step (terminates the episode)
+    ``arc_impacts``     impacts task: running count of impacts on the marked arc
+    ==================  ==========================================================================
 
     **Determinism.** ``reset(seed=k)`` then the same actions give bitwise the same episode;
     later ``reset()`` calls draw the next episodes of the same seed (see core.py). The env pickles.
