@@ -2,7 +2,6 @@
 certified period a plain flow), it resumes an event loop that stops early, and its compiled and
 plain-Python runs (single env and vector env) agree bitwise."""
 import math
-import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -16,13 +15,10 @@ from penny_env.envs.scene import resolve
 from penny_env.physics import scalar
 from penny_env.physics.compiled import available
 from penny_env.physics.scalar import scalar_model
-from penny_env.physics.laws import make_law
-from penny_env.physics.params import PennyParams, SolverSettings
-from penny_env.physics.tables import make_table
+from penny_env.physics.params import PennyParams
 
 needs_numba = pytest.mark.skipif(not available(), reason="numba is not installed")
 P = PennyParams()
-SET = SolverSettings()
 TABLES = [{"kind": "ellipse", "a": 0.15, "b": 0.2}, {"kind": "circle", "r": 0.12},
           {"kind": "stadium", "radius": 0.1, "length": 0.15}]
 
