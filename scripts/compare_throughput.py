@@ -49,11 +49,12 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--budget", type=int, default=250_000, help="env-steps per vector measurement")
     ap.add_argument("--presets", nargs="*", default=list(PRESETS))
+    ap.add_argument("--sizes", nargs="*", type=int, default=list(SIZES))
     args = ap.parse_args(argv)
     best = {"old": {}, "new": {}}
     for r in range(args.rounds):
         for name in ("old", "new") if r % 2 == 0 else ("new", "old"):
-            got = measure(getattr(args, name), args.presets, list(SIZES), args.budget)
+            got = measure(getattr(args, name), args.presets, args.sizes, args.budget)
             for k, v in got.items():
                 best[name][k] = max(best[name].get(k, 0.0), v)
             print(f"round {r + 1} {name} done", file=sys.stderr, flush=True)

@@ -28,8 +28,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import advance_m, certified_free_trig, flow1
-from .tasks import on_arc, step_reward
+from ..physics.scalar import Model, advance_m, certified_free_trig, flow1
+from .tasks import TaskConstants, on_arc, step_reward
 
 XP = SCALAR      # the math namespace of tasks.py's formulas (numba_math in the compiled copies)
 prange = range   # numba.prange in the compiled copies
@@ -208,8 +208,42 @@ def observe_rows(rows, S, trig, target, count, p, obs):
         observe(obs[i], s, tr, target[0, i], target[1, i], count[i], p)
 
 
-PYTHON_FUNCTIONS = {"env_step": env_step, "step_envs": step_envs, "observe_rows": observe_rows,
-                    "initial_observation": initial_observation}
+# -- entry points called from Python -----------------------------------------------------------------
+# The constants travel as plain tuples, consts = pack(p, m, k), rebuilt into their NamedTuples inside:
+# numba unboxes a plain tuple several times faster than a NamedTuple, which matters for the single
+# env, whose whole step costs a few microseconds.
+def pack(p, m, k):
+    """(EnvParams, Model, TaskConstants) as plain tuples, for the entry points below."""
+    return tuple(p), tuple(m), tuple(k)
+
+
+def env_step_packed(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, consts, obs, times, ends):
+    """env_step with consts = pack(p, m, k) (PennyEnv's entry point)."""
+    pt, mt, kt = consts
+    return env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, EnvParams(*pt), Model(*mt),
+                    TaskConstants(*kt), obs, times, ends)
+
+
+def step_envs_packed(S, trig, actions, skip, target, arc, count, dist, steps, time, consts,
+                     obs, rew, term, trunc, n_imp, times, ends):
+    """step_envs with consts = pack(p, m, k) (PennyVectorEnv's entry point)."""
+    pt, mt, kt = consts
+    step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, EnvParams(*pt), Model(*mt),
+              TaskConstants(*kt), obs, rew, term, trunc, n_imp, times, ends)
+
+
+def observe_rows_packed(rows, S, trig, target, count, consts, obs):
+    """observe_rows with consts = pack(p, m, k)."""
+    observe_rows(rows, S, trig, target, count, EnvParams(*consts[0]), obs)
+
+
+def initial_observation_packed(obs, s, tx, ty, consts):
+    """initial_observation with consts = pack(p, m, k)."""
+    return initial_observation(obs, s, tx, ty, EnvParams(*consts[0]))
+
+
+PYTHON_FUNCTIONS = {"env_step": env_step_packed, "step_envs": step_envs_packed, "observe_rows": observe_rows_packed,
+                    "initial_observation": initial_observation_packed}
 
 
 def compiled_env_functions() -> dict:
@@ -238,16 +272,21 @@ def compiled_env_functions() -> dict:
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
     for f in (clip_action, observe, angle_trig, transition):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    single = compiled.jit_copy(env_step, namespace, jit)
+    namespace["observe_rows"] = compiled.jit_copy(observe_rows, namespace, jit)
+    namespace["initial_observation"] = compiled.jit_copy(initial_observation, namespace, jit)
+    namespace["env_step"] = compiled.jit_copy(env_step, namespace, jit)
+    single = compiled.jit_copy(env_step_packed, namespace, jit)
     # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
     namespace["env_step"] = compiled.jit_copy(env_step, namespace, numba.njit(cache=True, inline="always"))
+    namespace["step_envs"] = compiled.jit_copy(step_envs, namespace, numba.njit(parallel=True, cache=True))
     _COMPILED = {"env_step": single,
-                 "step_envs": compiled.jit_copy(step_envs, namespace, numba.njit(parallel=True, cache=True)),
-                 "observe_rows": compiled.jit_copy(observe_rows, namespace, jit),
-                 "initial_observation": compiled.jit_copy(initial_observation, namespace, jit)}
+                 "step_envs": compiled.jit_copy(step_envs_packed, namespace, jit),
+                 "observe_rows": compiled.jit_copy(observe_rows_packed, namespace, jit),
+                 "initial_observation": compiled.jit_copy(initial_observation_packed, namespace, jit)}
     return _COMPILED
 
 
 def env_functions(backend: str) -> dict:
-    """The step functions of a backend: "numba" (compiled) or "python" (these functions as they are)."""
+    """The entry points of a backend ("env_step", "step_envs", "observe_rows", "initial_observation",
+    taking consts = pack(p, m, k)): "numba" (compiled) or "python" (these functions as they are)."""
     return compiled_env_functions() if backend == "numba" else PYTHON_FUNCTIONS

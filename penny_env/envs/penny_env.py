@@ -11,10 +11,20 @@ from gymnasium.error import ResetNeeded
 
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys
-from .functional import env_functions, env_params
+from .functional import env_functions, env_params, pack
 from .scene import resolve
 
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
+
+
+def _action_list(action, n_act):
+    """The action as a list of n_act floats (check_actions' checks; its common case, a float
+    array of the right shape with finite entries, without its array passes)."""
+    if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == (n_act,):
+        vals = action.tolist()
+        if all(math.isfinite(v) for v in vals):
+            return vals
+    return check_actions(action, (n_act,), "action").tolist()
 
 
 class PennyEnv(gym.Env):
@@ -147,19 +157,20 @@ class PennyEnv(gym.Env):
         # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes)
         self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
+        self._consts = pack(self._p, self._m, core.k)
         self._times = np.empty(IMPACTS_BUFFER)
         self._ends = np.empty(IMPACTS_BUFFER, dtype=np.int64)
         if core.backend == "numba":  # load the machine code now, not in the first step
             obs = np.empty(core.obs_dim, dtype=np.float32)
             s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-            trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._p)
-            self._fns["env_step"](s, trig, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0.0, 0, self._p, self._m, core.k, obs,
-                                  self._times, self._ends)
+            trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._consts)
+            self._fns["env_step"](s, trig, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0.0, 0, self._consts, obs, self._times,
+                                  self._ends)
 
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_renderer"] = None
-        for key in ("_core", "_fns", "_p", "_m", "_times", "_ends"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_times", "_ends"):
             state.pop(key)
         return state
 
@@ -199,7 +210,7 @@ class PennyEnv(gym.Env):
         self._trail.clear()
         self._trail.append((x, y))
         obs = np.empty(core.obs_dim, dtype=np.float32)
-        self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._p)
+        self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
         info = {"kinetic_energy": self._energy(), "time": 0.0, "distance": self._d}
         if self.render_mode == "human":
             self.render()
@@ -215,11 +226,11 @@ class PennyEnv(gym.Env):
         if self._done:
             raise ResetNeeded("PennyEnv.step() called after the episode ended; call reset()")
         c = self._core
-        a = check_actions(action, (c.n_act,), "action").tolist()
+        a = _action_list(action, c.n_act)
         a1 = a[1] if c.n_act == 2 else 0.0
         obs = np.empty(c.obs_dim, dtype=np.float32)
         args = (self._s, self._trig, a[0], a1, self._target[0], self._target[1], self._arc[0], self._arc[1],
-                self._count, self._d, self._steps, self._p, self._m, c.k, obs)
+                self._count, self._d, self._steps, self._consts, obs)
         out = self._fns["env_step"](*args, self._times, self._ends)
         n_imp = out[2]
         if n_imp > self._times.shape[0]:  # more impacts than the buffer holds: the same pure step, a larger buffer

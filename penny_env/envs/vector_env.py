@@ -11,7 +11,7 @@ from gymnasium.vector.utils import batch_space
 from ..physics import kinetic_energy
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys, X, Y
-from .functional import env_functions, env_params
+from .functional import env_functions, env_params, pack
 from .scene import resolve
 
 MAX_IMPACTS_IN_INFO = 8
@@ -124,7 +124,7 @@ class PennyVectorEnv(VectorEnv):
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        for key in ("_core", "_fns", "_p", "_m"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts"):
             state.pop(key)
         state["_renderers"] = None
         return state
@@ -138,6 +138,7 @@ class PennyVectorEnv(VectorEnv):
         self._fns = env_functions(core.backend)
         self._p = env_params(core)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
+        self._consts = pack(self._p, self._m, core.k)
         if core.backend == "numba":
             self._warm_up()
         return core
@@ -149,9 +150,9 @@ class PennyVectorEnv(VectorEnv):
         trig = np.zeros((4, 1))
         obs = np.empty((1, c.obs_dim), dtype=np.float32)
         ints = lambda: np.zeros(1, dtype=np.int64)  # noqa: E731
-        self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S, trig, np.zeros((2, 1)), ints(), self._p, obs)
+        self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S, trig, np.zeros((2, 1)), ints(), self._consts, obs)
         self._fns["step_envs"](S, trig, np.zeros((1, 2)), np.zeros(1, dtype=bool), np.zeros((2, 1)), np.zeros((2, 1)),
-                               ints(), np.zeros(1), ints(), np.zeros(1), self._p, self._m, c.k, obs, np.zeros(1),
+                               ints(), np.zeros(1), ints(), np.zeros(1), self._consts, obs, np.zeros(1),
                                np.zeros(1, dtype=bool), np.zeros(1, dtype=bool), ints(),
                                np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8))
 
@@ -209,7 +210,7 @@ class PennyVectorEnv(VectorEnv):
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         rows = self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
-        self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._p, self._obs)
+        self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._consts, self._obs)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
                           np.zeros(n, dtype=bool))
@@ -255,14 +256,14 @@ class PennyVectorEnv(VectorEnv):
         times = np.empty((n, K))
         ends = np.empty((n, K), dtype=np.int8)
         self._fns["step_envs"](self._S, self._trig, a, skip, self._target, self._arc, self._count, self._d,
-                               self._steps, self._t, self._p, self._m, c.k, obs, rew, term, trunc, n_imp,
+                               self._steps, self._t, self._consts, obs, rew, term, trunc, n_imp,
                                times, ends)
         self._extend_trails()
         done = term | trunc
         if next_step and skip.any():  # the envs whose episode ended at the previous step reset now
             self._episodes[skip] += np.uint64(1)
             self._fns["observe_rows"](self._reset_envs(skip), self._S, self._trig, self._target, self._count,
-                                      self._p, obs)
+                                      self._consts, obs)
         info = self._info(n_imp, times, ends, term)
         if next_step:
             self._autoreset = done
@@ -283,7 +284,7 @@ class PennyVectorEnv(VectorEnv):
         info["final_obs"], info["_final_obs"] = final_obs, done.copy()
         info["final_info"], info["_final_info"] = final_info, done.copy()
         self._episodes[done] += np.uint64(1)
-        self._fns["observe_rows"](self._reset_envs(done), self._S, self._trig, self._target, self._count, self._p,
+        self._fns["observe_rows"](self._reset_envs(done), self._S, self._trig, self._target, self._count, self._consts,
                                   obs)
 
     def _extend_trails(self):
