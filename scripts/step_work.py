@@ -63,8 +63,8 @@ def heavy_pennies(n, steps):
         venv = gym.make_vec(env_id, num_envs=n).unwrapped
         venv.reset(seed=0)
         venv.action_space.seed(0)
-        obs = np.empty(venv._core.obs_dim, np.float32)
-        times, ends = np.empty(64), np.empty(64, np.int64)
+        obs = np.empty((1, venv._core.obs_dim), np.float32)
+        times, ends = np.empty((1, 64)), np.empty((1, 64), np.int64)
         costs, step_times = [], []
         for _ in range(steps):
             a = venv.action_space.sample()
@@ -74,8 +74,8 @@ def heavy_pennies(n, steps):
             step_times.append(time.perf_counter() - t0)
             for i in np.flatnonzero(info["impacts"] > 8):
                 args = (tuple(S[:, i]), tuple(trig[:, i]), float(a[i, 0]), float(a[i, 1]), venv._target[0, i],
-                        venv._target[1, i], venv._arc[0, i], venv._arc[1, i], int(cnt[i]), d[i], int(st[i]), venv._p,
-                        venv._m, venv._core.k, obs, times, ends)
+                        venv._target[1, i], venv._arc[0, i], venv._arc[1, i], int(cnt[i]), d[i], int(st[i]), venv._consts,
+                        obs, times, ends)
                 best = np.inf
                 for _ in range(3):
                     t0 = time.perf_counter()

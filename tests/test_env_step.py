@@ -54,9 +54,10 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
     for s in states:
         acc1 = 0.0 if rng.random() < 0.5 else rng.normal() * 40
         acc2 = rng.normal() * 20
-        times, ends = np.full(64, np.nan), np.zeros(64, dtype=np.int64)
+        times, ends = np.full((1, 64), np.nan), np.zeros((1, 64), dtype=np.int64)
         s1, n, _ = functional.transition(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p, m, core.k, 1.0, 0.0,
-                                         times, ends)
+                                         times, ends, 0)
+        times, ends = times[0], ends[0]
         ref, imps, _, elapsed = scalar.advance_m(s, acc1, acc2, p.dt, m, 0)
         assert np.array_equal(_bits(s1), _bits(ref)) and n == len(imps) and elapsed == p.dt
         assert np.array_equal(_bits(times[:n]), _bits([i[0] for i in imps])) and list(ends[:n]) == [i[1] for i in imps]
@@ -81,14 +82,16 @@ def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
     checked = 0
     for s in _random_inside(rng, core.table, 20):
         s = s[:4] + (30.0, s[5])
-        times0, ends0 = np.zeros(200), np.zeros(200, dtype=np.int64)
-        ref = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0, times0, ends0)
+        times0, ends0 = np.zeros((2, 200)), np.zeros((2, 200), dtype=np.int64)
+        ref = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0, times0, ends0, 1)
+        times0, ends0 = times0[1], ends0[1]
         with monkeypatch.context() as mp:
             mp.setattr(functional, "advance_m", one_impact_per_call)
-            times1, ends1 = np.zeros(200), np.zeros(200, dtype=np.int64)
+            times1, ends1 = np.zeros((1, 200)), np.zeros((1, 200), dtype=np.int64)
             calls.clear()
             got = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0,
-                                        times1, ends1)
+                                        times1, ends1, 0)
+            times1, ends1 = times1[0], ends1[0]
         n = ref[1]
         assert n > 3 and got[1] == n and got[2] == ref[2] and len(calls) >= n
         assert np.allclose(got[0], ref[0], rtol=1e-9, atol=1e-12)

@@ -6,8 +6,8 @@ its one penny; PennyVectorEnv calls :func:`step_envs`, a loop over the same :fun
 numba ``prange`` when compiled). So a sub-env of the vector env and a single env run the very same
 operations, bitwise.
 
-* :func:`initial_observation` / :func:`observe`: the observation of a state (layout in PennyEnv's
-  docstring), written into a float32 row.
+* :func:`observe`: the observation of a state (layout in PennyEnv's docstring), a tuple of floats;
+  :func:`write_row` stores it as a float32 row.
 * :func:`transition`: the penny over one control period (physics/scalar.py's per-penny loop).
 * :func:`env_step`: actions -> (transition, reward, termination, truncation, observation).
 
@@ -71,27 +71,25 @@ def clip_action(v):
     return -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
 
 
-def observe(obs, s, trig, tx, ty, count, p):
-    """Write the observation of state s into the float32 row obs; trig = (cos theta, sin theta,
-    cos phi, sin phi) of s; (tx, ty) the target; count the arc impacts so far."""
+def observe(s, trig, tx, ty, count, p):
+    """The observation of state s as an 11-tuple of floats (layout in PennyEnv's docstring; entry 10,
+    the arc count, belongs to the impacts task only and is 0 otherwise); trig = (cos theta,
+    sin theta, cos phi, sin phi) of s; (tx, ty) the target; count the arc impacts so far."""
     x, y = s[0], s[1]
     inv = p.inv_L
     ox, oy = x * inv, y * inv
     rx, ry = (tx - x) * inv, (ty - y) * inv
     if p.plane:
         ox, oy, rx, ry = math.tanh(ox), math.tanh(oy), math.tanh(rx), math.tanh(ry)
-    obs[0] = ox
-    obs[1] = oy
-    obs[2] = trig[0]
-    obs[3] = trig[1]
-    obs[4] = trig[2]
-    obs[5] = trig[3]
-    obs[6] = math.tanh(s[4] * p.s_W)
-    obs[7] = math.tanh(s[5] * p.s_w)
-    obs[8] = rx
-    obs[9] = ry
-    if p.impacts:
-        obs[10] = min(count / p.goal, 1.0)
+    arcs = min(count / p.goal, 1.0) if p.impacts else 0.0
+    return (ox, oy, trig[0], trig[1], trig[2], trig[3], math.tanh(s[4] * p.s_W), math.tanh(s[5] * p.s_w), rx, ry, arcs)
+
+
+def write_row(obs, i, o):
+    """Row i of the float32 observations obs (N, obs_dim) from observe()'s tuple (indexing obs
+    in place: a row view would touch the array's shared reference count from every thread)."""
+    for j in range(obs.shape[1]):
+        obs[i, j] = o[j]
 
 
 def angle_trig(s):
@@ -100,16 +98,16 @@ def angle_trig(s):
 
 
 def initial_observation(obs, s, tx, ty, p):
-    """observe() of a fresh episode (count 0); returns angle_trig(s)."""
+    """Row 0 of obs (1, obs_dim) from observe() of a fresh episode (count 0); returns angle_trig(s)."""
     trig = angle_trig(s)
-    observe(obs, s, trig, tx, ty, 0, p)
+    write_row(obs, 0, observe(s, trig, tx, ty, 0, p))
     return trig
 
 
-def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends):
+def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row):
     """(new state, impacts, arc impacts) of the penny over one control period; c_ph, s_ph: cos and
-    sin of the heading s[3]. The first len(times) impacts' times (since the period's start) and
-    ends go into times and ends; the counts are exact.
+    sin of the heading s[3]. The times (since the period's start) and ends of the first
+    times.shape[1] impacts go into row `row` of times and ends; the counts are exact.
 
     A period the certificate (scalar.certified_free_trig) shows free of impacts is one flow. Any
     other goes through the physics' event loop advance_m, which may stop early to bound its work per
@@ -120,7 +118,7 @@ def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends):
     n = 0
     n_arc = 0
     t0 = 0.0
-    cap = times.shape[0]
+    cap = times.shape[1]
     while True:
         rem = p.dt - t0
         s, impacts, _, elapsed = advance_m(s, acc1, acc2, rem, m, 0)
@@ -130,20 +128,21 @@ def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends):
             if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), arc_c, arc_s, k, XP):
                 n_arc += 1
             if n < cap:
-                times[n] = t0 + t_j
-                ends[n] = end
+                times[row, n] = t0 + t_j
+                ends[row, n] = end
             n += 1
         if not elapsed < rem or (elapsed <= 0.0 and len(impacts) == 0):
             return s, n, n_arc
         t0 += elapsed
 
 
-def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, k, obs, times, ends):
+def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, k, times, ends, row):
     """One step of one env: clip the actions (a1 unused with one control), advance the penny,
-    count the arc impacts, reward, termination and truncation, and write the observation into obs.
+    count the arc impacts, reward, termination, truncation and observation; impact times and ends
+    go into row `row` of times and ends (see transition).
 
-    Returns (state, trig, impacts, count, distance, reward, terminated, truncated) with count the
-    running arc-impact count and trig angle_trig(state)."""
+    Returns (state, trig, observation, impacts, count, distance, reward, terminated, truncated)
+    with trig angle_trig(state), observation observe()'s tuple, count the running arc count."""
     a0 = clip_action(a0)
     if p.n_act == 2:
         a1 = clip_action(a1)
@@ -152,14 +151,14 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     else:
         acc1, acc2 = (a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2)
         ctrl = (a0 * a0) / 1
-    s1, n_imp, n_arc = transition(s, trig[2], trig[3], acc1, acc2, p, m, k, arc_c, arc_s, times, ends)
+    s1, n_imp, n_arc = transition(s, trig[2], trig[3], acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row)
     count = count + n_arc
     dx, dy = tx - s1[0], ty - s1[1]
     d = math.sqrt(dx * dx + dy * dy)
     r, success = step_reward(k, d_prev, d, s1[4], ctrl, n_arc, count, XP)
     trig1 = angle_trig(s1)
-    observe(obs, s1, trig1, tx, ty, count, p)
-    return s1, trig1, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps
+    o = observe(s1, trig1, tx, ty, count, p)
+    return s1, trig1, o, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps
 
 
 def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, m, k,
@@ -181,9 +180,10 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
         s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
         tr = (trig[0, i], trig[1, i], trig[2, i], trig[3, i])
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
-        s1, tr1, n, c, d, r, te, tu = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
-                                                  arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m, k,
-                                                  obs[i], times[i], ends[i])
+        s1, tr1, o, n, c, d, r, te, tu = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
+                                                     arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m, k,
+                                                     times, ends, i)
+        write_row(obs, i, o)
         for row in range(6):
             S[row, i] = s1[row]
         for row in range(4):
@@ -205,7 +205,7 @@ def observe_rows(rows, S, trig, target, count, p, obs):
         tr = angle_trig(s)
         for row in range(4):
             trig[row, i] = tr[row]
-        observe(obs[i], s, tr, target[0, i], target[1, i], count[i], p)
+        write_row(obs, i, observe(s, tr, target[0, i], target[1, i], count[i], p))
 
 
 # -- entry points called from Python -----------------------------------------------------------------
@@ -218,10 +218,14 @@ def pack(p, m, k):
 
 
 def env_step_packed(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, consts, obs, times, ends):
-    """env_step with consts = pack(p, m, k) (PennyEnv's entry point)."""
+    """env_step with consts = pack(p, m, k) (PennyEnv's entry point): the observation goes into row 0
+    of obs (1, obs_dim), the impacts into row 0 of times and ends (1, K); returns env_step's tuple
+    without the observation."""
     pt, mt, kt = consts
-    return env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, EnvParams(*pt), Model(*mt),
-                    TaskConstants(*kt), obs, times, ends)
+    s1, trig1, o, n, c, d, r, te, tu = env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
+                                                EnvParams(*pt), Model(*mt), TaskConstants(*kt), times, ends, 0)
+    write_row(obs, 0, o)
+    return s1, trig1, n, c, d, r, te, tu
 
 
 def step_envs_packed(S, trig, actions, skip, target, arc, count, dist, steps, time, consts,
@@ -270,7 +274,7 @@ def compiled_env_functions() -> dict:
         namespace[name] = phys[name]
     for f in (tasks.on_arc, tasks.step_reward):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    for f in (clip_action, observe, angle_trig, transition):
+    for f in (clip_action, observe, write_row, angle_trig, transition):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
     namespace["observe_rows"] = compiled.jit_copy(observe_rows, namespace, jit)
     namespace["initial_observation"] = compiled.jit_copy(initial_observation, namespace, jit)

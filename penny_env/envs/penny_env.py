@@ -158,10 +158,10 @@ class PennyEnv(gym.Env):
         self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
         self._consts = pack(self._p, self._m, core.k)
-        self._times = np.empty(IMPACTS_BUFFER)
-        self._ends = np.empty(IMPACTS_BUFFER, dtype=np.int64)
+        self._times = np.empty((1, IMPACTS_BUFFER))
+        self._ends = np.empty((1, IMPACTS_BUFFER), dtype=np.int64)
         if core.backend == "numba":  # load the machine code now, not in the first step
-            obs = np.empty(core.obs_dim, dtype=np.float32)
+            obs = np.empty((1, core.obs_dim), dtype=np.float32)
             s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._consts)
             self._fns["env_step"](s, trig, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0.0, 0, self._consts, obs, self._times,
@@ -209,12 +209,12 @@ class PennyEnv(gym.Env):
         self._d = math.sqrt(dx * dx + dy * dy)
         self._trail.clear()
         self._trail.append((x, y))
-        obs = np.empty(core.obs_dim, dtype=np.float32)
+        obs = np.empty((1, core.obs_dim), dtype=np.float32)
         self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
         info = {"kinetic_energy": self._energy(), "time": 0.0, "distance": self._d}
         if self.render_mode == "human":
             self.render()
-        return obs, info
+        return obs[0], info
 
     def _energy(self):
         s = self._s
@@ -228,21 +228,21 @@ class PennyEnv(gym.Env):
         c = self._core
         a = _action_list(action, c.n_act)
         a1 = a[1] if c.n_act == 2 else 0.0
-        obs = np.empty(c.obs_dim, dtype=np.float32)
+        obs = np.empty((1, c.obs_dim), dtype=np.float32)
         args = (self._s, self._trig, a[0], a1, self._target[0], self._target[1], self._arc[0], self._arc[1],
                 self._count, self._d, self._steps, self._consts, obs)
         out = self._fns["env_step"](*args, self._times, self._ends)
         n_imp = out[2]
-        if n_imp > self._times.shape[0]:  # more impacts than the buffer holds: the same pure step, a larger buffer
-            self._times, self._ends = np.empty(n_imp), np.empty(n_imp, dtype=np.int64)
+        if n_imp > self._times.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
+            self._times, self._ends = np.empty((1, n_imp)), np.empty((1, n_imp), dtype=np.int64)
             out = self._fns["env_step"](*args, self._times, self._ends)
         s, self._trig, n_imp, self._count, d, reward, terminated, truncated = out
         self._s = s
         self._d = d
         self._steps += 1
         self._t += c.dt
-        info = {"impacts": n_imp, "impact_times": tuple(self._times[:n_imp].tolist()),
-                "impact_ends": tuple(self._ends[:n_imp].tolist()),
+        info = {"impacts": n_imp, "impact_times": tuple(self._times[0, :n_imp].tolist()),
+                "impact_ends": tuple(self._ends[0, :n_imp].tolist()),
                 "kinetic_energy": self._energy(), "time": self._t, "distance": d, "is_success": terminated}
         if c.impacts:
             info["arc_impacts"] = self._count
@@ -252,7 +252,7 @@ class PennyEnv(gym.Env):
             self._trail.append((s[0], s[1]))
             if self.render_mode == "human":
                 self.render()
-        return obs, float(reward), terminated, truncated, info
+        return obs[0], float(reward), terminated, truncated, info
 
     # -- state access (analysis, tests) -----------------------------------------------------------
     @property
