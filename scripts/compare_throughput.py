@@ -5,10 +5,11 @@
 Each round measures every case once per checkout, alternating old and new, each in a fresh
 subprocess whose PYTHONPATH is that checkout (the two cannot share a process: same package name);
 the best of the rounds is kept per case and checkout (on a loaded machine the fastest run is the
-least disturbed). Cases: the single env (gymnasium.make, us per step) and the vector env
-(gymnasium.make_vec, env-steps per second) at N = 1, 16, 256, 4096, on a few presets, with
-penny_env.analysis.throughput's functions (random actions drawn beforehand). Prints a table of
-ratios new / old (speed: > 1 is faster)."""
+least disturbed). Cases: the single env (gymnasium.make, resets
+included) and the vector env (gymnasium.make_vec) at N = 1, 16, 256, 4096, on a few presets, random
+actions drawn beforehand. Rates are env-steps per second of CPU time (time.process_time, all the
+process's threads): on a machine loaded by other work, wall-clock rates swing by several times
+from run to run, CPU time much less. Prints a table of ratios new / old (> 1: the new is faster)."""
 from __future__ import annotations
 
 import argparse
@@ -21,16 +22,27 @@ PRESETS = ("PennyReach-Ellipse-v0", "PennyImpacts-Stadium-v0", "PennyPark-Stadiu
 SIZES = (1, 16, 256, 4096)
 
 _MEASURE = r"""
-import json, sys, gymnasium as gym, penny_env
-from penny_env.analysis.throughput import single_step_us, vector_rate
+import json, sys, time, gymnasium as gym, numpy as np, penny_env
 presets, sizes, budget = json.loads(sys.argv[1]), json.loads(sys.argv[2]), int(sys.argv[3])
+
+def rate(env, steps, n):
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    acts = [env.action_space.sample() for _ in range(steps)]
+    for a in acts[:3]:
+        env.step(a)
+    t0 = time.process_time()  # CPU time of this process (all its threads): what other load cannot inflate
+    for a in acts:
+        out = env.step(a)
+        if n == 0 and (out[2] or out[3]):
+            env.reset()
+    return max(n, 1) * steps / (time.process_time() - t0)
+
 out = {}
 for env_id in presets:
-    us, _ = single_step_us(env_id, budget // 10)
-    out[env_id + " single"] = 1e6 / us
+    out[env_id + " single"] = rate(gym.make(env_id), budget // 10, 0)
     for n in sizes:
-        steps = max(10, min(1000, budget // n))
-        out[f"{env_id} N={n}"] = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k), n, steps)
+        out[f"{env_id} N={n}"] = rate(gym.make_vec(env_id, num_envs=n), max(10, min(2000, budget // n)), n)
 print(json.dumps(out))
 """
 
