@@ -88,8 +88,18 @@ def observe(s, trig, tx, ty, count, p):
 def write_row(obs, i, o):
     """Row i of the float32 observations obs (N, obs_dim) from observe()'s tuple (indexing obs
     in place: a row view would touch the array's shared reference count from every thread)."""
-    for j in range(obs.shape[1]):
-        obs[i, j] = o[j]
+    obs[i, 0] = o[0]  # (unrolled: constant indices into the tuple compile to plain moves)
+    obs[i, 1] = o[1]
+    obs[i, 2] = o[2]
+    obs[i, 3] = o[3]
+    obs[i, 4] = o[4]
+    obs[i, 5] = o[5]
+    obs[i, 6] = o[6]
+    obs[i, 7] = o[7]
+    obs[i, 8] = o[8]
+    obs[i, 9] = o[9]
+    if obs.shape[1] > 10:
+        obs[i, 10] = o[10]
 
 
 def angle_trig(s):
@@ -274,8 +284,12 @@ def compiled_env_functions() -> dict:
         namespace[name] = phys[name]
     for f in (tasks.on_arc, tasks.step_reward):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    for f in (clip_action, observe, write_row, angle_trig, transition):
+    for f in (clip_action, observe, angle_trig):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
+    # inlined: a call that passes arrays increments and decrements their reference counts, atomically
+    inline = numba.njit(cache=True, inline="always")
+    for f in (write_row, transition):
+        namespace[f.__name__] = compiled.jit_copy(f, namespace, inline)
     namespace["observe_rows"] = compiled.jit_copy(observe_rows, namespace, jit)
     namespace["initial_observation"] = compiled.jit_copy(initial_observation, namespace, jit)
     namespace["env_step"] = compiled.jit_copy(env_step, namespace, jit)
