@@ -241,9 +241,14 @@ class PennyEnv(gym.Env):
         self._d = d
         self._steps += 1
         self._t += c.dt
-        info = {"impacts": n_imp, "impact_times": tuple(self._times[0, :n_imp].tolist()),
-                "impact_ends": tuple(self._ends[0, :n_imp].tolist()),
-                "kinetic_energy": self._energy(), "time": self._t, "distance": d, "is_success": terminated}
+        if n_imp:
+            times, ends = tuple(self._times[0, :n_imp].tolist()), tuple(self._ends[0, :n_imp].tolist())
+        else:
+            times = ends = ()
+        W, w = s[4], s[5]
+        info = {"impacts": n_imp, "impact_times": times, "impact_ends": ends,
+                "kinetic_energy": 0.5 * (c.Itot * W ** 2 + c.J * w ** 2), "time": self._t, "distance": d,
+                "is_success": terminated}
         if c.impacts:
             info["arc_impacts"] = self._count
         if terminated or truncated:
