@@ -5,11 +5,9 @@ import math
 
 import numpy as np
 import pytest
-from gymnasium.vector import AutoresetMode
 from hypothesis import given, settings as hsettings, strategies as st
 
 import penny_env as pe
-from penny_env import PennyEnv, PennyVectorEnv
 from penny_env.physics import advance_pennies, flow
 from penny_env.physics.compiled import IMPACT_CAPACITY, CompiledBatch, available, compiled_functions
 from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis_small
@@ -91,100 +89,12 @@ def test_small_angle_polynomials_match_libm(cis, limit, u):
     assert cc == c and sc == s  # and compiled
 
 
-def test_backend_choice_and_errors():
-    v = PennyVectorEnv(3, backend="auto")
-    assert v._core.backend == "numba"
-    with pytest.raises(ValueError, match="backend"):
-        PennyVectorEnv(3, backend="cuda")
+def test_batch_refuses_tables_that_do_not_compile():
+    # (the environments' backend tests moved to tests/test_env_step.py)
     table = pe.ConvexTable(lambda x, y: (x * x + y * y - 0.01) / 0.2, lambda x, y: (x / 0.1, y / 0.1), grad_bound=1.0,
                            hessian_bound=10.0, extent=(-0.11, 0.11, -0.11, 0.11))
     with pytest.raises(ValueError, match="table"):
         CompiledBatch(pe.PennyParams(), table, make_law("elastic"), SET)
-
-
-def _assert_steps_agree(a, b, t):
-    """Two vector-env step results equal: obs, rewards, flags and every info entry under its mask."""
-    for x, y in zip(a[:4], b[:4]):
-        assert np.array_equal(x, y), t
-    ia, ib = a[4], b[4]
-    assert set(ia) == set(ib), (t, set(ia) ^ set(ib))
-    for key in ia:
-        if key.startswith("_"):
-            assert np.array_equal(ia[key], ib[key]), (t, key)
-        elif ia[key].dtype == object:  # final_obs / final_info
-            for i in np.flatnonzero(ia["_" + key]):
-                fa, fb = ia[key][i], ib[key][i]
-                assert np.array_equal(fa, fb) if key == "final_obs" else fa == fb, (t, key)
-        else:
-            m = ia["_" + key]
-            assert ia[key].shape == ib[key].shape, (t, key)
-            assert np.array_equal(ia[key][m], ib[key][m], equal_nan=True), (t, key)
-
-
-@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
-@pytest.mark.parametrize("env_id", ["PennyImpacts-Stadium-v0", "PennyPark-Circle-v0", "PennySteer-Plane-v0"])
-def test_vector_backends_agree(env_id, mode):
-    import gymnasium as gym
-    envs = [gym.make_vec(env_id, num_envs=64, backend=b, autoreset_mode=mode, max_episode_steps=60).unwrapped
-            for b in ("numba", "numpy")]
-    obs = [e.reset(seed=7)[0] for e in envs]
-    assert np.array_equal(obs[0], obs[1])
-    acts = np.random.default_rng(0).uniform(-1.2, 1.2, (150,) + envs[0].action_space.shape)
-    for t, a in enumerate(acts):
-        out = [e.step(a) for e in envs]
-        assert np.array_equal(envs[0].states, envs[1].states)
-        _assert_steps_agree(*out, t)
-
-
-def test_vector_step_collects_more_impacts_than_its_buffer():
-    # a narrow table, long control periods and fast rolling: many impacts per env and step, more
-    # than the compiled step's per-env buffer holds; both backends report every one
-    from penny_env.envs.compiled_step import CompiledStep
-    kw = dict(scene="ellipse", task="impacts", table={"kind": "ellipse", "a": 0.03, "b": 0.011}, control_dt=2.0,
-              init={"theta_dot": [20.0, 40.0], "spawn_fraction": 0.05}, max_episode_steps=20)
-    envs = [PennyVectorEnv(6, backend=b, **kw) for b in ("numba", "numpy")]
-    for e in envs:
-        e.reset(seed=1)
-    acts = np.random.default_rng(2).uniform(-1, 1, (20, 6, 2))
-    most = 0
-    for t, a in enumerate(acts):
-        out = [e.step(a) for e in envs]
-        _assert_steps_agree(*out, t)
-        most = max(most, int(out[0][4]["impacts"].max()))
-    assert most > CompiledStep.IMPACT_CAPACITY
-
-
-def test_auto_falls_back_to_numpy_without_numba(monkeypatch):
-    from penny_env.physics import compiled
-    monkeypatch.setattr(compiled, "available", lambda: False)
-    assert PennyVectorEnv(2, backend="auto")._core.backend == "numpy"
-    with pytest.raises(ValueError, match="numba"):
-        PennyVectorEnv(2, backend="numba")
-
-
-@pytest.mark.parametrize("kw", [dict(scene="stadium", task="impacts"), dict(scene="circle", task="park", law="plastic"),
-                                dict(scene="ellipse", task="reach", law=0.5, actuation="steer"),
-                                dict(scene="plane", task="reach"),
-                                dict(scene="ellipse", task="impacts", table={"kind": "ellipse", "a": 0.03, "b": 0.011},
-                                     control_dt=0.5, init={"theta_dot": [20.0, 40.0], "spawn_fraction": 0.05})])
-def test_single_env_backends_agree(kw):
-    # the single env's compiled physics (backend "numba") and its plain-Python loop ("numpy"): bitwise
-    envs = [PennyEnv(backend=b, max_episode_steps=60, **kw) for b in ("numba", "numpy")]
-    assert [e._core.fast.compiled for e in envs] == [True, False]
-    obs = [e.reset(seed=11)[0] for e in envs]
-    assert np.array_equal(obs[0], obs[1])
-    acts = np.random.default_rng(4).uniform(-1.2, 1.2, (150,) + envs[0].action_space.shape).astype(np.float32)
-    impacts = 0
-    for t, a in enumerate(acts):
-        out = [e.step(a) for e in envs]
-        assert np.array_equal(out[0][0], out[1][0]) and out[0][1:4] == out[1][1:4], t
-        assert out[0][4] == out[1][4], t  # info: impact times and ends, energy, time, distance
-        assert np.array_equal(envs[0].state, envs[1].state)
-        impacts += out[0][4]["impacts"]
-        if out[0][2] or out[0][3]:
-            for e in envs:
-                e.reset()
-    assert impacts > 0 or kw["task"] != "impacts"
 
 
 @pytest.mark.parametrize("table, law", [({"kind": "stadium", "radius": 0.1, "length": 0.1}, "elastic"),

@@ -87,7 +87,7 @@ def test_event_loop_resumes_after_the_cap(table):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_batch_and_env_paths_resume_after_the_cap(backend):
-    """Siblings: penny_env.batch.simulate (both backends) and the env's scalar fast path."""
+    """Siblings: penny_env.batch.simulate (both backends) and the single penny's loop (plain and compiled)."""
     s0 = np.array([0.0, 0.0, 0.0, 0.3, 10.0, 0.2])
     settings = pe.SolverSettings(max_events_per_interval=2)
     table = pe.Ellipse(0.15, 0.2)
@@ -98,9 +98,12 @@ def test_batch_and_env_paths_resume_after_the_cap(backend):
     if backend == "numba":  # the compiled batch equals simulate() bitwise (same intervals, same resumption)
         tr = pe.simulate(s0, table=table, law="elastic", t_final=20.0, settings=settings)
         assert np.array_equal(tr.impact_times, res.times_of(0)) and np.array_equal(tr.final_state, res.final_states[0])
-    from penny_env.envs.fast_path import ScalarPhysics
-    fast = ScalarPhysics(PARAMS, table, ELASTIC, settings, compiled=backend == "numba")
-    s, impacts, rests = fast.advance(tuple(s0), 0.0, 0.0, 5.0)
+    # the single penny's loop, plain or compiled (the env step resumes the same way: tests/test_env_step.py)
+    advance = advance_through_m
+    if backend == "numba":
+        from penny_env.physics.compiled import compiled_functions
+        advance = compiled_functions()["advance_through_m"]
+    s, impacts, rests, _ = advance(tuple(s0), 0.0, 0.0, 5.0, scalar_model(PARAMS, table, ELASTIC, settings))
     assert len(impacts) > 2 and not rests
     assert energy(s)[0] == pytest.approx(energy(s0)[0], rel=1e-13)
 

@@ -13,7 +13,7 @@ from penny_env.envs.registration import env_presets
 PRESETS = env_presets()
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
+@pytest.mark.parametrize("backend", ["numba", "python"])
 @pytest.mark.parametrize("env_id", list(PRESETS))
 def test_equivalence_with_single_env(env_id, backend):
     kw = PRESETS[env_id]

@@ -8,7 +8,7 @@ Measured in one run on this machine:
   CartPole-v1; microseconds per step and the ratio to Pendulum-v1 (random actions drawn beforehand,
   resets included);
 * PennyVectorEnv at N = 1, 16, 256, 4096 (``gymnasium.make_vec``, native; the default backend,
-  compiled with numba where installed, and the numpy backend) against gymnasium's SyncVectorEnv of
+  the compiled step) against gymnasium's SyncVectorEnv of
   PennyEnv and CartPole-v1's native vector env, in env-steps per second, and the peak memory per
   env of PennyVectorEnv (tracemalloc, construction + reset + steps). Each native run is a few
   hundred steps from reset, so episodes run through their autoresets.
@@ -158,15 +158,13 @@ def main(argv: list[str] | None = None) -> str:
     presets = (WALLED, "PennyReach-Plane-v0") if quick else VECTOR_PRESETS
     lines += ["", "## Vector environments (env-steps per second, random actions)", "",
               f"PennyVectorEnv's default backend here: **{backend}**.", "",
-              "| env | N | PennyVectorEnv | numpy backend | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
-              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+              "| env | N | PennyVectorEnv | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     big = []  # (env, N, native rate, sync rate) at the largest N
     for env_id in presets:
         for n in sizes:
             steps = _steps_for(n, quick)
             native = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k), n, steps, repeats=repeats)
-            numpy_rate = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, backend="numpy"), n,
-                                     max(3, steps // 4) if n >= 256 else steps, repeats=repeats)
             sync_steps = max(3, min(steps, (2_000 if quick else 40_000) // n))
             sync = vector_rate(lambda k: gym.make_vec(env_id, num_envs=k, vectorization_mode="sync"), n, sync_steps,
                                repeats=repeats)
@@ -175,9 +173,9 @@ def main(argv: list[str] | None = None) -> str:
             mem = peak_memory_per_env(env_id, n)
             if n == max(sizes):
                 big.append((env_id, n, native, sync))
-            lines.append(f"| {env_id} | {n} | {native:,.0f} | {numpy_rate:,.0f} | {sync:,.0f} | {native / sync:.1f} | {cp:,.0f} "
+            lines.append(f"| {env_id} | {n} | {native:,.0f} | {sync:,.0f} | {native / sync:.1f} | {cp:,.0f} "
                          f"| {mem / 1024:.1f} KiB |")
-            print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  numpy {numpy_rate:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
+            print(f"vector {env_id:28s} N={n:5d} native {native:12,.0f}/s  sync {sync:10,.0f}/s  x{native / sync:6.1f}"
                   f"  CartPole {cp:12,.0f}/s  mem/env {mem / 1024:.1f} KiB", flush=True)
     lines += ["", "## Targets, from the numbers above", ""] + _targets(rows, pend, big)
     report = "\n".join(lines) + "\n"

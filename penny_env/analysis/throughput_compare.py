@@ -4,7 +4,7 @@
 
 Each tree is measured in its own subprocess (``PYTHONPATH=TREE``, so each imports its own penny_env) and the
 two alternate, round after round, so that both see the same load of a shared machine; every rate is the best
-of the rounds (timeit's convention). Measured for every env id the two trees share: the single env through
+of the rounds (timeit's convention). ``--clock cpu`` times CPU time instead of wall-clock time. Measured for every env id the two trees share: the single env through
 ``gymnasium.make`` (us per step, random actions, resets included) and the native vector env
 (``gymnasium.make_vec``, its default backend) at N = 1, 16, 256, 4096 (env-steps per second). The report
 gives after / before speed ratios (above 1: faster) and lists every measurement that lost more than
@@ -37,6 +37,7 @@ def _worker(args) -> dict:
     import penny_env  # noqa: F401  (registers the ids)
     from penny_env.envs.registration import env_ids
 
+    clock = time.process_time if args.clock == "cpu" else time.perf_counter
     ids = [i for i in (args.ids or env_ids())]
     out = {"penny_env": os.path.dirname(penny_env.__file__), "single": {}, "vector": {}}
     for env_id in ids:
@@ -47,11 +48,11 @@ def _worker(args) -> dict:
         for a in acts[:50]:  # warm up (numba's cache, first episode)
             if any(env.step(a)[2:4]):
                 env.reset()
-        t0 = time.perf_counter()
+        t0 = clock()
         for a in acts:
             if any(env.step(a)[2:4]):
                 env.reset()
-        out["single"][env_id] = (time.perf_counter() - t0) / len(acts) * 1e6
+        out["single"][env_id] = (clock() - t0) / len(acts) * 1e6
         env.close()
     for env_id in ids:
         for n in args.sizes:
@@ -62,10 +63,10 @@ def _worker(args) -> dict:
             acts = [venv.action_space.sample() for _ in range(steps)]
             for a in acts[:3]:
                 venv.step(a)
-            t0 = time.perf_counter()
+            t0 = clock()
             for a in acts:
                 venv.step(a)
-            out["vector"][f"{env_id}|{n}"] = n * steps / (time.perf_counter() - t0)
+            out["vector"][f"{env_id}|{n}"] = n * steps / (clock() - t0)
             venv.close()
     np.asarray(0)  # numpy imported for gymnasium's spaces either way
     return out
@@ -73,7 +74,8 @@ def _worker(args) -> dict:
 
 def _measure(tree: str, args) -> dict:
     env = dict(os.environ, PYTHONPATH=os.path.abspath(tree), PYTHONDONTWRITEBYTECODE="1")
-    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--single-steps", str(args.single_steps),
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--clock", args.clock,
+           "--single-steps", str(args.single_steps),
            "--vector-budget", str(args.vector_budget), "--sizes", *map(str, args.sizes)]
     if args.ids:
         cmd += ["--ids", *args.ids]
@@ -102,6 +104,9 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--tolerance", type=float, default=0.05, help="a loss beyond this share is listed")
     ap.add_argument("--out", default=None, help="Markdown report (default: a temporary directory)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="wall: time.perf_counter; cpu: time.process_time (all of the process's threads: steadier on a "
+                         "machine loaded by other work, but it counts the threads' CPU time, not the elapsed time)")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--ids", nargs="*", default=None, help="env ids (default: every id both trees register)")
     ap.add_argument("--sizes", nargs="*", type=int, default=None)
@@ -138,7 +143,8 @@ def main(argv: list[str] | None = None) -> str:
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
              f"- command: `{cmd}`",
-             f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), best of each",
+             f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), best of each; "
+             f"clock: {'CPU time (time.process_time)' if args.clock == 'cpu' else 'wall clock'}",
              "", "## Single environment (us per step, gymnasium.make)", "",
              "| env | before | after | speed after / before |", "| --- | ---: | ---: | ---: |"]
     losses = []

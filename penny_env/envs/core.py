@@ -1,5 +1,5 @@
-"""The episode logic shared by PennyEnv and PennyVectorEnv: constants, per-episode sampling,
-observations, actions and the batched control step.
+"""What PennyEnv and PennyVectorEnv share besides the step (functional.py): the scene's constants,
+the spaces' bounds and the per-episode sampling.
 
 Episode randomness is counter based: the initial state and the target of episode ``e`` of an env
 whose seed key is ``k`` are a hash (SplitMix64) of (k, e, draw index), computed with uint64 numpy
@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics import SolverSettings, flow
-from ..physics import advance_pennies as advance  # the plain-Python per-penny loop
-from .fast_path import ScalarPhysics, certified_free
+from ..physics import SolverSettings
+from ..physics.validation import as_state, check_inside
 from .scene import Scene, Task, ConfigError
 from .tasks import task_constants
 
@@ -52,7 +51,7 @@ def uniforms(keys, episodes, n=N_DRAWS) -> np.ndarray:
 class Core:
     """Everything the environments compute, from (Scene, Task). Picklable (rebuilt from them)."""
 
-    def __init__(self, scene: Scene, task: Task, settings: SolverSettings | None = None, backend: str = "numpy"):
+    def __init__(self, scene: Scene, task: Task, settings: SolverSettings | None = None, backend: str = "auto"):
         self.scene, self.task = scene, task
         self.settings = settings if settings is not None else SolverSettings()
         self.params = scene.make_params()
@@ -76,8 +75,7 @@ class Core:
         self.impacts = task.kind == "impacts"
         self.obs_dim = 11 if self.impacts else 10
         self.max_steps = task.max_episode_steps
-        self.backend = self._backend(backend)  # "numba": compiled physics (single env) and step (vector env)
-        self.fast = ScalarPhysics(p, self.table, self.law, self.settings, compiled=self.backend == "numba")
+        self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
         ax, ay = scene.spawn_axes()
         self.ax, self.ay = ax, ay
         fmax = 1.0 if self.plane else 1.0 - p.R / self.table.inradius
@@ -92,15 +90,29 @@ class Core:
                               f"ellipse's semi-minor axis = {self.f_target * min(ax, ay):.6g} m, got {self.heading_offset!r}")
 
     def _backend(self, backend):
-        """'numba' or 'numpy' (see physics.compiled.choose_backend)."""
+        """'numba' or 'python': 'auto' takes numba where it is installed and the table compiles
+        (physics.compiled.choose_backend), else the plain-Python step with a warning naming it."""
         from ..physics.compiled import choose_backend
-        return choose_backend(backend, self.params, self.table, self.law, self.settings, "scene.table")
+        if backend not in ("auto", "numba", "python"):
+            raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
+        if backend == "python":
+            return "python"
+        try:
+            chosen = "numba" if choose_backend(backend, self.params, self.table, self.law, self.settings,
+                                               "scene.table") == "numba" else "python"
+        except ValueError as err:  # (the batch's wording names its own plain backend)
+            raise ValueError(str(err).replace("backend='numpy'", "backend='python'")) from None
+        if chosen == "python":
+            import warnings
+            warnings.warn("penny_env: the compiled step cannot run here (numba missing or a table that does not "
+                          "compile); using the plain-Python step (backend='python'), much slower", stacklevel=4)
+        return chosen
 
     def __getstate__(self):
         return {"scene": self.scene, "task": self.task, "settings": self.settings, "backend": self.backend}
 
     def __setstate__(self, state):
-        self.__init__(state["scene"], state["task"], state["settings"], state.get("backend", "numpy"))
+        self.__init__(state["scene"], state["task"], state["settings"], state.get("backend", "auto"))
 
     # -- spaces --------------------------------------------------------------------------
     def obs_bounds(self):
@@ -170,68 +182,89 @@ class Core:
         """Distance from the centre to the wall along (c, s) (the table's own wall_distance)."""
         return self.table.wall_distance(c, s)
 
-    # -- actions -------------------------------------------------------------------------
-    def accelerations(self, a):
-        """(acc1, acc2) arrays from clipped (N, n_act) float64 actions."""
-        n = a.shape[0]
-        if self.n_act == 2:
-            return a[:, 0] * self.gain1, a[:, 1] * self.gain2
-        if self.controls == (0,):
-            return a[:, 0] * self.gain1, np.zeros(n)
-        return np.zeros(n), a[:, 0] * self.gain2
-
-    # -- observations --------------------------------------------------------------------
-    @staticmethod
-    def angle_trig(S):
-        """(4, N): cos theta, sin theta, cos phi, sin phi."""
-        return np.stack([np.cos(S[THETA]), np.sin(S[THETA]), np.cos(S[PHI]), np.sin(S[PHI])])
-
-    def observe(self, S, target, count=None, trig=None):
-        """(N, obs_dim) float32 observations (layout in PennyEnv's docstring); trig: angle_trig(S)
-        if already known."""
-        n = S.shape[1]
-        o = np.empty((self.obs_dim, n))
-        rx = target[0] - S[X]
-        ry = target[1] - S[Y]
-        o[0] = S[X] * self.inv_L
-        o[1] = S[Y] * self.inv_L
-        o[8] = rx * self.inv_L
-        o[9] = ry * self.inv_L
-        if self.plane:
-            np.tanh(o[0:2], out=o[0:2])
-            np.tanh(o[8:10], out=o[8:10])
-        o[2:6] = self.angle_trig(S) if trig is None else trig
-        o[6] = np.tanh(S[THETA_DOT] * self.s_W)
-        o[7] = np.tanh(S[PHI_DOT] * self.s_w)
-        if self.impacts:
-            o[10] = np.minimum(count / self.k.goal, 1.0)
-        return o.T.astype(np.float32)
-
     def distance(self, S, target):
         dx = target[0] - S[X]
         dy = target[1] - S[Y]
         return np.sqrt(dx * dx + dy * dy)
 
-    # -- physics ---------------------------------------------------------------------------
-    def advance(self, S, acc1, acc2):
-        """(new S, log arrays (env, time, end, state (k, 6)) or None) over one control period,
-        batched with numpy (the vector env's numpy backend).
+    # -- reset options -------------------------------------------------------------------
+    def check_options(self, options, n, extra=()):
+        """(states (n, 6) or None, targets (n, 2) or None) from reset options {"state", "target"}
+        (plus the keys in extra, which the caller handles), with the checks of the scene fields:
+        states finite with both ends of the penny inside the table; targets finite, inside the
+        region the contact point can reach (and so inside the observation's Box). One row (shape
+        (6,) / (2,)) applies to every env."""
+        if not isinstance(options, dict):
+            raise TypeError(f"reset options must be a dict, got {type(options).__name__}")
+        allowed = ["state", "target", *extra]
+        unknown = sorted(set(options) - set(allowed), key=str)
+        if unknown:
+            raise ValueError(f"reset options: unknown key(s) {unknown}; allowed: {allowed}")
+        states = targets = None
+        if "state" in options:
+            states = self._rows(options["state"], n, 6, "options['state']")
+            for i, s in enumerate(states):
+                name = "options['state']" if n == 1 else f"options['state'][{i}]"
+                as_state(s, name)
+                check_inside(s[:, None], self.params, self.table, name)
+        if "target" in options:
+            if self.impacts:
+                raise ValueError("options['target']: the impacts task's target is the centre of the marked arc, "
+                                 "drawn each episode; it cannot be set")
+            targets = self._rows(options["target"], n, 2, "options['target']")
+            for i, t in enumerate(targets):
+                self._check_target(t, "options['target']" if n == 1 else f"options['target'][{i}]")
+        return states, targets
 
-        The open plane is one closed-form (or quadrature) flow. With walls, the pennies whose first
-        certified search step excludes an impact are flowed directly (what advance() would do),
-        the others go through physics.advance_pennies()."""
+    @staticmethod
+    def _rows(value, n, width, name):
+        if value is None or isinstance(value, (str, bytes)):
+            raise TypeError(f"{name} must be an array of floats, got {type(value).__name__}")
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "iuf":
+            raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
+        arr = arr.astype(np.float64)
+        if arr.shape == (width,):
+            arr = np.broadcast_to(arr, (n, width))
+        if arr.shape != (n, width):
+            raise ValueError(f"{name} must have shape ({width},){'' if n == 1 else f' or ({n}, {width})'}, got {arr.shape}")
+        if width == 2 and not np.isfinite(arr).all():  # (states: as_state names the fields)
+            raise ValueError(f"{name} has non-finite entries")
+        return np.array(arr)
+
+    def _check_target(self, t, name):
+        """A target the contact point can reach: some heading puts both ends of the penny inside
+        the table (64 headings tried); on the open plane any finite point."""
         if self.plane:
-            return flow(S, acc1, acc2, self.dt, self.R), None
-        free = certified_free(S, acc1, acc2, self.dt, self.params, self.table, self.settings)
-        if free.all():
-            return flow(S, acc1, acc2, self.dt, self.R), None
-        out = np.empty_like(S)
-        i = np.flatnonzero(free)
-        j = np.flatnonzero(~free)
-        if i.size:
-            out[:, i] = flow(S[:, i], acc1[i], acc2[i], self.dt, self.R)
-        sub, log, _ = advance(S[:, j], acc1[j], acc2[j], self.dt, self.params, self.table, self.law, self.settings)
-        out[:, j] = sub
-        if log.env.size == 0:
-            return out, None
-        return out, (j[log.env], log.time, log.end, log.state)
+            return
+        ph = np.linspace(0.0, np.pi, 64, endpoint=False)
+        R = self.R
+        fits = ((self.table.h(t[0] + R * np.cos(ph), t[1] + R * np.sin(ph)) < 0)
+                & (self.table.h(t[0] - R * np.cos(ph), t[1] - R * np.sin(ph)) < 0))
+        if not fits.any():
+            raise ValueError(f"{name} = ({t[0]:.6g}, {t[1]:.6g}) is outside the region the penny's contact point "
+                             "can reach (no heading keeps both ends inside the table)")
+
+
+def check_actions(actions, shape, name="action"):
+    """float64 array of the given shape from actions: a TypeError for a wrong type (strings,
+    None, bools, complex numbers, objects), a ValueError naming the sub-env(s) for a wrong shape
+    or non-finite entries. Nothing is clipped here (the step clips)."""
+    if actions is None or isinstance(actions, (str, bytes)):
+        raise TypeError(f"{name} must be an array of floats, got {type(actions).__name__}")
+    arr = np.asarray(actions)
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64)
+    if arr.shape != shape:
+        if len(shape) == 2 and shape[1] == 1 and arr.shape == shape[:1]:
+            arr = arr[:, None]
+        else:
+            raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
+    finite = np.isfinite(arr)
+    if not finite.all():
+        if arr.ndim == 1:
+            raise ValueError(f"{name} has a non-finite entry: {arr.tolist()}")
+        bad = np.flatnonzero(~finite.all(axis=1))
+        raise ValueError(f"{name}: non-finite action in sub-env(s) {bad[:10].tolist()}{' ...' if bad.size > 10 else ''}")
+    return np.ascontiguousarray(arr)

@@ -9,12 +9,22 @@ import gymnasium as gym
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from ..physics import advance_pennies as _advance_batch
-from ..physics.validation import as_state, check_inside
-from .core import Core, seed_keys
+from ..physics.scalar import scalar_model
+from .core import Core, check_actions, seed_keys
+from .functional import env_functions, env_params, pack
 from .scene import resolve
-from ..physics.kernels import SCALAR
-from .tasks import on_arc, step_reward
+
+IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
+
+
+def _action_list(action, n_act):
+    """The action as a list of n_act floats (check_actions' checks; its common case, a float
+    array of the right shape with finite entries, without its array passes)."""
+    if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == (n_act,):
+        vals = action.tolist()
+        if all(math.isfinite(v) for v in vals):
+            return vals
+    return check_actions(action, (n_act,), "action").tolist()
 
 
 class PennyEnv(gym.Env):
@@ -29,17 +39,21 @@ class PennyEnv(gym.Env):
     found and processed). The open plane (table kind "none") is the non-hybrid penny.
 
     **Configuration.** ``PennyEnv(scene="ellipse", task="reach", render_mode=None, backend="auto",
-    **overrides)``: scene and task are preset names (``penny_env/presets/scenes/*.yaml``,
-    ``penny_env/presets/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` / ``Task``
-    objects; keyword overrides set any field of either (see their docstrings); an unknown or
-    invalid field raises a ``ConfigError`` (a ``ValueError``) naming it. backend: "numba" runs the
-    physics' scalar event loop compiled (the optional numba, ``pip install "penny_env[fast]"``),
-    "numpy" runs it as plain Python floats; "auto" (default) takes numba where it is installed
-    and the table compiles (the built-in tables). Both give bitwise the same episodes (tested).
+    truncate=True, **overrides)``: scene and task are preset names (``penny_env/presets/scenes/*.yaml``,
+    ``penny_env/presets/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` /
+    ``Task`` objects; keyword overrides set any field of either (see their docstrings); an unknown
+    keyword raises ``UnknownFieldError`` (a ``ConfigError`` and a ``TypeError``), an invalid value a
+    ``ConfigError`` (a ``ValueError``), naming the field. The step is envs/functional.py's
+    ``env_step`` (the one PennyVectorEnv runs for each of its envs). backend: "numba" runs it
+    compiled, "python" as plain Python (debugging; bitwise the same episodes, tested); "auto"
+    (default) takes numba unless the table does not compile. truncate: False leaves truncation to a
+    wrapper (the registered ids: gymnasium's TimeLimit, so ``gymnasium.make(id, max_episode_steps=N)``
+    is honoured both ways).
 
     **Action space** ``Box(-1, 1, (k,), float32)``, one entry per actuated control, held
     constant over ``control_dt`` seconds; entries are clipped to [-1, 1], then scaled to the
-    torque limits. Non-finite entries or a wrong shape raise ``ValueError``.
+    torque limits. A wrong type (strings, None, bools, complex numbers) raises ``TypeError``,
+    non-finite entries or a wrong shape ``ValueError``.
 
     =========  ========================  =======================================
     actuation  action                    torques
@@ -77,20 +91,33 @@ class PennyEnv(gym.Env):
       the table's centre) of the arc's centre direction, drawn each episode.
 
     **Episode end.** Terminated on success (the conditions above). Truncated after the task's
-    ``max_episode_steps`` (the env truncates itself; the registered ids also carry it as
-    ``max_episode_steps``). ``info["is_success"]`` is set on the last step of an episode.
+    ``max_episode_steps`` (``truncate=True``, direct construction) or by gymnasium's TimeLimit
+    (the registered ids; ``gymnasium.make(id, max_episode_steps=N)``). ``info["is_success"]`` is in
+    every step's info (True on the step that succeeds), so every episode end carries it.
 
     **Starting state.** The contact point is uniform in ``init.spawn_fraction`` times the table's
     spawn ellipse (the ellipse itself, the circle, or the stadium's inscribed ellipse), theta,
     phi, theta_dot and phi_dot uniform in their ``init`` ranges; targets are uniform in
     ``target_fraction (1 - R / inradius)`` times the spawn ellipse (reachable by the contact
     point). ``reset(options={"state": (x, y, theta, phi, theta_dot, phi_dot), "target": (tx, ty)})``
-    sets them explicitly.
+    sets them explicitly, checked as the scene's fields: the state finite with both ends of the
+    penny inside the table, the target finite and where some heading fits the penny (the region
+    its contact point can reach); the impacts task's target (the arc) cannot be set.
 
-    **info** of every step: ``impacts`` (count inside the step), ``impact_times`` (tuple of times
-    since the step's start [s]), ``impact_ends`` (tuple of +1 front / -1 back; tuples so that
-    gymnasium's SyncVectorEnv can batch infos of different lengths), ``kinetic_energy`` [J], ``time`` (simulated
-    time since reset [s]), ``distance`` [m]; impacts task: ``arc_impacts`` (running count).
+    **info** of every step:
+
+    ==================  ==========================================================================
+    key                 value
+    ==================  ==========================================================================
+    ``impacts``         count of impacts inside the step
+    ``impact_times``    tuple of every impact's time since the step's start [s]
+    ``impact_ends``     tuple of +1 (front end) / -1 (back end)
+    ``kinetic_energy``  [J] after the step
+    ``time``            simulated time since reset [s]
+    ``distance``        contact point to target [m]
+    ``is_success``      the task's success condition on this step (terminates the episode)
+    ``arc_impacts``     impacts task: running count of impacts on the marked arc
+    ==================  ==========================================================================
 
     **Determinism.** ``reset(seed=k)`` then the same actions give bitwise the same episode;
     later ``reset()`` calls draw the next episodes of the same seed (see core.py). The env pickles.
@@ -98,9 +125,13 @@ class PennyEnv(gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
 
-    def __init__(self, scene="ellipse", task="reach", render_mode: str | None = None, backend="auto", **overrides):
+    def __init__(self, scene="ellipse", task="reach", render_mode: str | None = None, backend="auto",
+                 truncate: bool = True, **overrides):
         self.scene, self.task = resolve(scene, task, **overrides)
+        if not isinstance(truncate, bool):
+            raise TypeError(f"truncate must be a bool, got {type(truncate).__name__}")
         self.backend = backend
+        self.truncate = truncate
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.render_mode = render_mode
@@ -108,7 +139,8 @@ class PennyEnv(gym.Env):
         self._setup()
 
     def _setup(self):
-        core = self._core = Core(self.scene, self.task, backend=self.backend)
+        self._make_core()
+        core = self._core
         self.action_space = spaces.Box(-1.0, 1.0, (core.n_act,), np.float32)
         lo, hi = core.obs_bounds()
         self.observation_space = spaces.Box(lo, hi, dtype=np.float32)
@@ -120,15 +152,32 @@ class PennyEnv(gym.Env):
         self._trail = deque(maxlen=200)
         self._hud = {}  # what the frame's text line and impact flashes show (rendering.Renderer.draw)
 
+    def _make_core(self):
+        core = self._core = Core(self.scene, self.task, backend=self.backend)
+        self._fns = env_functions(core.backend)
+        # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes)
+        self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
+        self._m = scalar_model(core.params, core.table, core.law, core.settings)
+        self._consts = pack(self._p, self._m, core.k)
+        self._times = np.empty((1, IMPACTS_BUFFER))
+        self._ends = np.empty((1, IMPACTS_BUFFER), dtype=np.int64)
+        if core.backend == "numba":  # load the machine code now, not in the first step
+            obs = np.empty((1, core.obs_dim), dtype=np.float32)
+            s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._consts)
+            self._fns["env_step"](s, trig, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0.0, 0, self._consts, obs, self._times,
+                                  self._ends)
+
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_renderer"] = None
-        state.pop("_core")
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_times", "_ends"):
+            state.pop(key)
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        self._core = Core(self.scene, self.task, backend=self.backend)
+        self._make_core()
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -143,8 +192,12 @@ class PennyEnv(gym.Env):
         else:
             self._episode += 1
         S, target, arc = core.sample(self._key, np.array([self._episode], dtype=np.uint64))
-        if options:
-            S, target = self._apply_options(options, S, target)
+        if options is not None:
+            state, tgt = core.check_options(options, 1)
+            if state is not None:
+                S = state.T
+            if tgt is not None:
+                target = tgt.T
         self._s = tuple(S[:, 0].tolist())
         self._target = (float(target[0, 0]), float(target[1, 0]))
         self._arc = (float(arc[0, 0]), float(arc[1, 0]))
@@ -158,57 +211,16 @@ class PennyEnv(gym.Env):
         self._trail.clear()
         self._trail.append((x, y))
         self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
+        obs = np.empty((1, core.obs_dim), dtype=np.float32)
+        self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
         info = {"kinetic_energy": self._energy(), "time": 0.0, "distance": self._d}
         if self.render_mode == "human":
             self.render()
-        return self._obs(), info
-
-    def _apply_options(self, options, S, target):
-        unknown = sorted(set(options) - {"state", "target"})
-        if unknown:
-            raise ValueError(f"reset options: unknown key(s) {unknown}; allowed: ['state', 'target']")
-        if "state" in options:
-            s = as_state(options["state"], "options['state']")[:, None]
-            check_inside(s, self._core.params, self._core.table, "options['state']")
-            S = s
-        if "target" in options:
-            t = np.array(options["target"], dtype=float).reshape(-1)
-            if t.shape != (2,) or not np.all(np.isfinite(t)):
-                raise ValueError(f"options['target'] must be a finite (x, y) pair, got {options['target']!r}")
-            target = t[:, None]
-        return S, target
+        return obs[0], info
 
     def _energy(self):
         s = self._s
         return 0.5 * (self._core.Itot * s[4] ** 2 + self._core.J * s[5] ** 2)
-
-    def _obs(self):
-        c = self._core
-        x, y, th, ph, W, w = self._s
-        inv = c.inv_L
-        ox, oy = x * inv, y * inv
-        rx, ry = (self._target[0] - x) * inv, (self._target[1] - y) * inv
-        if c.plane:
-            ox, oy, rx, ry = math.tanh(ox), math.tanh(oy), math.tanh(rx), math.tanh(ry)
-        vals = [ox, oy, math.cos(th), math.sin(th), math.cos(ph), math.sin(ph),
-                math.tanh(W * c.s_W), math.tanh(w * c.s_w), rx, ry]
-        if c.impacts:
-            vals.append(min(self._count / c.k.goal, 1.0))
-        return np.array(vals, dtype=np.float32)
-
-    def _action(self, action):
-        c = self._core
-        try:
-            arr = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be an array of {c.n_act} floats, got {action!r}") from None
-        if arr.shape != (c.n_act,):
-            raise ValueError(f"action must have shape ({c.n_act},) for actuation {self.scene.actuation!r}, got shape {arr.shape}")
-        vals = arr.tolist()
-        for v in vals:
-            if not math.isfinite(v):
-                raise ValueError(f"action has a non-finite entry: {vals}")
-        return [-1.0 if v < -1.0 else (1.0 if v > 1.0 else v) for v in vals]
 
     def step(self, action):
         if self._s is None:
@@ -216,63 +228,54 @@ class PennyEnv(gym.Env):
         if self._done:
             raise ResetNeeded("PennyEnv.step() called after the episode ended; call reset()")
         c = self._core
-        a = self._action(action)
-        if c.n_act == 2:
-            acc1, acc2 = a[0] * c.gain1, a[1] * c.gain2
-            ctrl = (a[0] * a[0] + a[1] * a[1]) / 2
-        else:
-            acc1, acc2 = (a[0] * c.gain1, 0.0) if c.controls == (0,) else (0.0, a[0] * c.gain2)
-            ctrl = (a[0] * a[0]) / 1
-        if c.fast is not None:
-            s, events, _ = c.fast.advance(self._s, acc1, acc2, c.dt)
-        else:
-            s, events = self._advance_slow(acc1, acc2)
+        a = _action_list(action, c.n_act)
+        a1 = a[1] if c.n_act == 2 else 0.0
+        obs = np.empty((1, c.obs_dim), dtype=np.float32)
+        args = (self._s, self._trig, a[0], a1, self._target[0], self._target[1], self._arc[0], self._arc[1],
+                self._count, self._d, self._steps, self._consts, obs)
+        prev = self._s
+        out = self._fns["env_step"](*args, self._times, self._ends)
+        n_imp = out[2]
+        if n_imp > self._times.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
+            self._times, self._ends = np.empty((1, n_imp)), np.empty((1, n_imp), dtype=np.int64)
+            out = self._fns["env_step"](*args, self._times, self._ends)
+        s, self._trig, n_imp, self._count, d, reward, terminated, truncated = out
         self._s = s
-        n_imp = len(events)
-        n_arc = 0
-        if n_imp:
-            R, k = c.R, c.k
-            cb, sb = self._arc
-            for _, end, post in events:
-                sR = end * R
-                if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), cb, sb, k, SCALAR):
-                    n_arc += 1
-            times = tuple(e[0] for e in events)
-            ends = tuple(e[1] for e in events)
-        else:
-            times = ends = ()
-        self._count += n_arc
-        x, y = s[0], s[1]
-        dx, dy = self._target[0] - x, self._target[1] - y
-        d = math.sqrt(dx * dx + dy * dy)
-        reward, success = step_reward(c.k, self._d, d, s[4], ctrl, n_arc, self._count, SCALAR)
         self._d = d
         self._steps += 1
         self._t += c.dt
-        terminated = bool(success)
-        truncated = self._steps >= c.max_steps
+        if n_imp:
+            times, ends = tuple(self._times[0, :n_imp].tolist()), tuple(self._ends[0, :n_imp].tolist())
+        else:
+            times = ends = ()
+        W, w = s[4], s[5]
         info = {"impacts": n_imp, "impact_times": times, "impact_ends": ends,
-                "kinetic_energy": self._energy(), "time": self._t, "distance": d}
+                "kinetic_energy": 0.5 * (c.Itot * W ** 2 + c.J * w ** 2), "time": self._t, "distance": d,
+                "is_success": terminated}
         if c.impacts:
             info["arc_impacts"] = self._count
         if terminated or truncated:
             self._done = True
-            info["is_success"] = terminated
         if self.render_mode is not None:
-            self._trail.append((x, y))
-            t0 = self._t - c.dt
-            self._hud["impacts"].extend((t0 + t, e, st) for t, e, st in events)
+            self._trail.append((s[0], s[1]))
+            if n_imp:
+                self._hud["impacts"].extend(self._impacts_for_render(prev, a[0], a1, times))
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
-        return self._obs(), float(reward), terminated, truncated, info
+        return obs[0], float(reward), terminated, truncated, info
 
-    def _advance_slow(self, acc1, acc2):
-        c = self._core
-        S = np.array(self._s)[:, None]
-        S, log, _ = _advance_batch(S, acc1, acc2, c.dt, c.params, c.table, c.law, c.settings)
-        events = [(float(t), int(e), tuple(st.tolist())) for t, e, st in zip(log.time, log.end, log.state)]
-        return tuple(S[:, 0].tolist()), events
+    def _impacts_for_render(self, s, a0, a1, times):
+        """(time since reset, end, post-impact state) of the step's impacts, for the renderer's flashes: the
+        step's period from its start state s rerun in the plain-Python event loop (rendering only)."""
+        from ..physics.scalar import advance_through_m
+
+        p = self._p
+        acc1, acc2 = (a0 * p.gain1, a1 * p.gain2) if p.n_act == 2 else \
+            ((a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2))
+        _, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, self._m)
+        t0 = self._t - p.dt
+        return [(t0 + t, end, post) for t, end, post in impacts[:len(times)]]
 
     # -- state access (analysis, tests) -----------------------------------------------------------
     @property

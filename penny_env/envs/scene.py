@@ -32,6 +32,12 @@ class ConfigError(ValueError):
     """An invalid scene/task configuration; the message names the field."""
 
 
+class UnknownFieldError(ConfigError, TypeError):
+    """A field (or keyword argument) that the scene and task do not have: a ConfigError, and a
+    TypeError as Python raises for an unexpected keyword argument (tools such as TorchRL probe
+    keywords that way)."""
+
+
 def _num(owner: str, name: str, value, *, positive=False, nonneg=False, lo=None, hi=None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         try:
@@ -73,7 +79,7 @@ def _keys(owner: str, value, allowed: dict) -> dict:
         raise ConfigError(f"{owner} must be a mapping, got {type(value).__name__}")
     unknown = sorted(set(value) - set(allowed))
     if unknown:
-        raise ConfigError(f"{owner}: unknown field(s) {unknown}; allowed: {sorted(allowed)}")
+        raise UnknownFieldError(f"{owner}: unknown field(s) {unknown}; allowed: {sorted(allowed)}")
     out = dict(allowed)
     out.update(value)
     return out
@@ -303,7 +309,7 @@ def _merge(base: dict, over: dict, owner: str, allowed: tuple) -> dict:
     out = dict(base)
     for k, v in over.items():
         if k not in allowed:
-            raise ConfigError(f"{owner}: unknown field {k!r}; fields: {list(allowed)}")
+            raise UnknownFieldError(f"{owner}: unknown field {k!r}; fields: {list(allowed)}")
         if k in _MERGED and isinstance(v, dict) and isinstance(out.get(k), dict):
             out[k] = {**out[k], **v}
         elif k == "table" and isinstance(v, dict) and "kind" not in v and isinstance(out.get(k), dict):
@@ -317,7 +323,7 @@ def _build(cls, data: dict, owner: str):
     allowed = SCENE_FIELDS if cls is Scene else TASK_FIELDS
     unknown = sorted(set(data) - set(allowed))
     if unknown:
-        raise ConfigError(f"{owner}: unknown field(s) {unknown}; fields: {list(allowed)}")
+        raise UnknownFieldError(f"{owner}: unknown field(s) {unknown}; fields: {list(allowed)}")
     return cls(**data)
 
 
@@ -329,7 +335,9 @@ def resolve(scene="ellipse", task="reach", **overrides) -> tuple[Scene, Task]:
     to = {k: v for k, v in overrides.items() if k in TASK_FIELDS}
     unknown = sorted(set(overrides) - set(so) - set(to))
     if unknown:
-        raise ConfigError(f"unknown field(s) {unknown}; scene fields: {list(SCENE_FIELDS)}, task fields: {list(TASK_FIELDS)}")
+        # worded as Python's own TypeError, which tools match (TorchRL retries without 'frameskip')
+        raise UnknownFieldError(f"unexpected keyword argument {unknown[0]!r}: unknown field(s) {unknown}; "
+                                f"scene fields: {list(SCENE_FIELDS)}, task fields: {list(TASK_FIELDS)}")
     where_s = f"scene {scene!r}" if isinstance(scene, (str, os.PathLike)) else "scene"
     where_t = f"task {task!r}" if isinstance(task, (str, os.PathLike)) else "task"
     return (_build(Scene, _merge(sc, so, where_s, SCENE_FIELDS), where_s),
@@ -342,4 +350,4 @@ def env_presets() -> dict:
     return data
 
 
-__all__ = ["Scene", "Task", "ConfigError", "resolve", "env_presets", "CONFIG_DIR", "replace"]
+__all__ = ["Scene", "Task", "ConfigError", "UnknownFieldError", "resolve", "env_presets", "CONFIG_DIR", "replace"]

@@ -1,6 +1,7 @@
-"""Rewards and termination of the tasks, written once for (N,) numpy arrays (PennyVectorEnv's
-numpy backend), Python floats (PennyEnv) and compiled code (the vector env's numba backend), in
-the style of physics/kernels.py: the math namespace ``xp`` comes last.
+"""Rewards and termination of the tasks, written once for the one env step (envs/functional.py):
+Python floats (backend "python") and compiled code (numba), in the style of physics/kernels.py:
+the math namespace ``xp`` comes last (kernels.SCALAR, or numba_math when compiled; numpy's
+kernels.ARRAY works too, for arrays over envs).
 
 Notation: d = |target - contact point| [m], d_prev its value before the step, L the scene's
 length scale, v = |R theta_dot| the rolling speed [m/s], a the clipped action in [-1, 1]^k,
@@ -24,7 +25,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from ..physics.kernels import ARRAY
+from ..physics.kernels import SCALAR
 
 REACH, PARK, IMPACTS = 0, 1, 2
 KIND_CODE = {"reach": REACH, "park": PARK, "impacts": IMPACTS}
@@ -60,15 +61,15 @@ def task_constants(scene, task, L) -> TaskConstants:
         all_arc=bool(task.arc_half_width >= math.pi), cos_hw=math.cos(min(task.arc_half_width, math.pi)))
 
 
-def on_arc(px, py, cb, sb, k: TaskConstants, xp=ARRAY):
-    """Impact points (px, py) on the arc centred on direction (cb, sb) (a bool, or a bool array)."""
+def on_arc(px, py, cb, sb, k: TaskConstants, xp=SCALAR):
+    """Impact points (px, py) on the arc centred on direction (cb, sb) (a bool)."""
     if k.all_arc:  # every impact point counts (they are finite), as a bool of px's shape
         return xp.abs(px) < xp.inf
     return px * cb + py * sb >= k.cos_hw * xp.sqrt(px * px + py * py)
 
 
-def step_reward(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count, xp=ARRAY):
-    """(reward, success) of one step (floats, or arrays over envs)."""
+def step_reward(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count, xp=SCALAR):
+    """(reward, success) of one step."""
     if k.kind == IMPACTS:
         success = count >= k.goal
         return k.ir * n_arc - k.cc * ctrl + k.bonus * success, success

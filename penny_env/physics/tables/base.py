@@ -112,7 +112,8 @@ def length(owner: str, name: str, value, allow_zero: bool = False) -> float:
     value = float(value)
     if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         raise ValueError(f"{owner}.{name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {value!r}")
-    if value != 0 and not LENGTH_RANGE[0] <= value <= LENGTH_RANGE[1]:
+    # a length that may be zero never divides (a stadium's straight side): only the upper bound applies to it
+    if value > LENGTH_RANGE[1] or (0 < value < LENGTH_RANGE[0] and not allow_zero):
         raise ValueError(f"{owner}.{name} must lie in [{LENGTH_RANGE[0]:g}, {LENGTH_RANGE[1]:g}], got {value!r}")
     return value
 

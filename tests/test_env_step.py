@@ -1,0 +1,216 @@
+"""The one env step (penny_env/envs/functional.py): its transition is the physics' event loop (a
+certified period a plain flow), it resumes an event loop that stops early, and its compiled and
+plain-Python runs (single env and vector env) agree bitwise."""
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+from penny_env import PennyEnv, PennyVectorEnv
+from penny_env.envs import functional
+from penny_env.envs.core import Core
+from penny_env.envs.scene import resolve
+from penny_env.physics import scalar
+from penny_env.physics.compiled import available
+from penny_env.physics.scalar import scalar_model
+from penny_env.physics.params import PennyParams
+
+needs_numba = pytest.mark.skipif(not available(), reason="numba is not installed")
+P = PennyParams()
+TABLES = [{"kind": "ellipse", "a": 0.15, "b": 0.2}, {"kind": "circle", "r": 0.12},
+          {"kind": "stadium", "radius": 0.1, "length": 0.15}]
+
+
+def _bits(a):
+    return np.asarray(a, dtype=float).view(np.int64)
+
+
+def _random_inside(rng, table, n):
+    out = []
+    while len(out) < n:
+        x, y = rng.uniform(-0.2, 0.2, 2)
+        ph = rng.uniform(-np.pi, np.pi)
+        c, s = math.cos(ph), math.sin(ph)
+        if table.h(x + P.R * c, y + P.R * s) < 0 and table.h(x - P.R * c, y - P.R * s) < 0:
+            out.append((x, y, rng.normal(), ph, rng.normal() * 20, rng.normal() * 8))
+    return out
+
+
+def _step_setup(table_cfg, law, dt):
+    scene, task = resolve("ellipse", "impacts", table=table_cfg, law=law, control_dt=dt, init={"spawn_fraction": 0.05})
+    core = Core(scene, task, backend="python")
+    return core, functional.env_params(core), scalar_model(core.params, core.table, core.law, core.settings)
+
+
+@pytest.mark.parametrize("ti", range(3))
+@pytest.mark.parametrize("law", ["elastic", "plastic", 0.5])
+def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
+    core, p, m = _step_setup(TABLES[ti], law, 0.05)
+    rng = np.random.default_rng(10 + ti)
+    states = _random_inside(rng, core.table, 150)
+    certified = impacts = 0
+    for s in states:
+        acc1 = 0.0 if rng.random() < 0.5 else rng.normal() * 40
+        acc2 = rng.normal() * 20
+        times, ends = np.full((1, 64), np.nan), np.zeros((1, 64), dtype=np.int64)
+        s1, n, _ = functional.transition(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p, m, core.k, 1.0, 0.0,
+                                         times, ends, 0)
+        times, ends = times[0], ends[0]
+        ref, imps, _, elapsed = scalar.advance_m(s, acc1, acc2, p.dt, m, 0)
+        assert np.array_equal(_bits(s1), _bits(ref)) and n == len(imps) and elapsed == p.dt
+        assert np.array_equal(_bits(times[:n]), _bits([i[0] for i in imps])) and list(ends[:n]) == [i[1] for i in imps]
+        if scalar.certified_free1(s, acc1, acc2, p.dt, m):
+            certified += 1
+            assert n == 0 and np.array_equal(_bits(s1), _bits(scalar.flow1(s, acc1, acc2, p.dt, m.R)))
+        impacts += n
+    assert 0 < certified < len(states) and impacts > 5
+
+
+def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
+    # physics.scalar.advance_m may stop after a bounded amount of work (elapsed < the time asked);
+    # the step calls it again until the control period is done: the same motion and impacts
+    core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
+    rng = np.random.default_rng(3)
+    calls = []
+
+    def one_impact_per_call(s, acc1, acc2, dt, m, stop_after):
+        calls.append(dt)
+        return scalar.advance_m(s, acc1, acc2, dt, m, 1)
+
+    checked = 0
+    for s in _random_inside(rng, core.table, 20):
+        s = s[:4] + (30.0, s[5])
+        times0, ends0 = np.zeros((2, 200)), np.zeros((2, 200), dtype=np.int64)
+        ref = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0, times0, ends0, 1)
+        times0, ends0 = times0[1], ends0[1]
+        with monkeypatch.context() as mp:
+            mp.setattr(functional, "advance_m", one_impact_per_call)
+            times1, ends1 = np.zeros((1, 200)), np.zeros((1, 200), dtype=np.int64)
+            calls.clear()
+            got = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0,
+                                        times1, ends1, 0)
+            times1, ends1 = times1[0], ends1[0]
+        n = ref[1]
+        assert n > 3 and got[1] == n and got[2] == ref[2] and len(calls) >= n
+        assert np.allclose(got[0], ref[0], rtol=1e-9, atol=1e-12)
+        assert np.allclose(times1[:n], times0[:n], rtol=1e-12, atol=1e-15) and np.array_equal(ends1[:n], ends0[:n])
+        checked += 1
+    assert checked == 20
+
+
+# -- compiled and plain-Python steps agree (moved here from tests/test_compiled.py) -----------------
+@needs_numba
+def test_backend_choice_and_errors():
+    v = PennyVectorEnv(3, backend="auto")
+    assert v._core.backend == "numba" and PennyEnv()._core.backend == "numba"
+    for cls in (PennyVectorEnv, PennyEnv):
+        with pytest.raises(ValueError, match="backend"):
+            cls(backend="cuda")
+        with pytest.raises(ValueError, match="backend"):
+            cls(backend="numpy")  # the numpy backend is gone
+
+
+def _assert_steps_agree(a, b, t):
+    """Two vector-env step results equal: obs, rewards, flags and every info entry under its mask."""
+    for x, y in zip(a[:4], b[:4]):
+        assert np.array_equal(x, y), t
+    ia, ib = a[4], b[4]
+    assert set(ia) == set(ib), (t, set(ia) ^ set(ib))
+    for key in ia:
+        if key.startswith("_"):
+            assert np.array_equal(ia[key], ib[key]), (t, key)
+        elif ia[key].dtype == object:  # final_obs / final_info
+            for i in np.flatnonzero(ia["_" + key]):
+                fa, fb = ia[key][i], ib[key][i]
+                assert np.array_equal(fa, fb) if key == "final_obs" else fa == fb, (t, key)
+        else:
+            m = ia["_" + key]
+            assert ia[key].shape == ib[key].shape, (t, key)
+            assert np.array_equal(ia[key][m], ib[key][m], equal_nan=True), (t, key)
+
+
+@needs_numba
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize("env_id", ["PennyImpacts-Stadium-v0", "PennyPark-Circle-v0", "PennySteer-Plane-v0"])
+def test_vector_backends_agree(env_id, mode):
+    envs = [gym.make_vec(env_id, num_envs=64, backend=b, autoreset_mode=mode, max_episode_steps=60).unwrapped
+            for b in ("numba", "python")]
+    obs = [e.reset(seed=7)[0] for e in envs]
+    assert np.array_equal(obs[0], obs[1])
+    acts = np.random.default_rng(0).uniform(-1.2, 1.2, (150,) + envs[0].action_space.shape)
+    for t, a in enumerate(acts):
+        out = [e.step(a) for e in envs]
+        assert np.array_equal(envs[0].states, envs[1].states)
+        _assert_steps_agree(*out, t)
+
+
+@needs_numba
+def test_vector_info_has_fixed_width_and_exact_counts():
+    # a narrow table, long control periods and fast rolling: more impacts per env and step than the
+    # info arrays' width (max_impacts_in_info); the count stays exact (the single env lists them all)
+    kw = dict(scene="ellipse", task="impacts", table={"kind": "ellipse", "a": 0.03, "b": 0.011}, control_dt=2.0,
+              init={"theta_dot": [20.0, 40.0], "spawn_fraction": 0.05}, max_episode_steps=20, impacts_goal=10**6)
+    envs = [PennyVectorEnv(6, backend=b, max_impacts_in_info=5, **kw) for b in ("numba", "python")]
+    singles = [PennyEnv(**kw) for _ in range(6)]
+    for e in envs:
+        e.reset(seed=1)
+    for i, s in enumerate(singles):
+        s.reset(seed=1 + i)
+    acts = np.random.default_rng(2).uniform(-1, 1, (19, 6, 2))
+    most = 0
+    for t, a in enumerate(acts):
+        out = [e.step(a) for e in envs]
+        _assert_steps_agree(*out, t)
+        info = out[0][4]
+        assert info["impact_times"].shape == (6, 5) and info["impact_ends"].shape == (6, 5)
+        for i, s in enumerate(singles):
+            if s._done:  # (its episode ended: the vector env resets it, NEXT_STEP)
+                continue
+            si = s.step(a[i])[4]
+            k = min(si["impacts"], 5)
+            assert si["impacts"] == info["impacts"][i]
+            assert np.array_equal(si["impact_times"][:k], info["impact_times"][i, :k])
+            assert np.isnan(info["impact_times"][i, k:]).all() and (info["impact_ends"][i, k:] == 0).all()
+        most = max(most, int(info["impacts"].max()))
+    assert most > 16  # beyond the vector info's width and the single env's first buffer (PennyEnv reruns)
+
+
+def test_auto_falls_back_to_python_without_numba(monkeypatch):
+    from penny_env.physics import compiled
+    monkeypatch.setattr(compiled, "available", lambda: False)
+    for cls in (PennyVectorEnv, PennyEnv):
+        with pytest.warns(UserWarning, match="python"):
+            assert cls(backend="auto")._core.backend == "python"
+        with pytest.raises(ValueError, match="numba"):
+            cls(backend="numba")
+
+
+@needs_numba
+@pytest.mark.parametrize("kw", [dict(scene="stadium", task="impacts"), dict(scene="circle", task="park", law="plastic"),
+                                dict(scene="ellipse", task="reach", law=0.5, actuation="steer"),
+                                dict(scene="plane", task="reach"),
+                                dict(scene="ellipse", task="impacts", table={"kind": "ellipse", "a": 0.03, "b": 0.011},
+                                     control_dt=0.5, init={"theta_dot": [20.0, 40.0], "spawn_fraction": 0.05})])
+@needs_numba
+def test_single_env_backends_agree(kw):
+    # the single env's compiled step (backend "numba") and the same functions uncompiled ("python"): bitwise
+    envs = [PennyEnv(backend=b, max_episode_steps=60, **kw) for b in ("numba", "python")]
+    assert [e._core.backend for e in envs] == ["numba", "python"]
+    obs = [e.reset(seed=11)[0] for e in envs]
+    assert np.array_equal(obs[0], obs[1])
+    acts = np.random.default_rng(4).uniform(-1.2, 1.2, (150,) + envs[0].action_space.shape).astype(np.float32)
+    impacts = 0
+    for t, a in enumerate(acts):
+        out = [e.step(a) for e in envs]
+        assert np.array_equal(out[0][0], out[1][0]) and out[0][1:4] == out[1][1:4], t
+        assert out[0][4] == out[1][4], t  # info: impact times and ends, energy, time, distance
+        assert np.array_equal(envs[0].state, envs[1].state)
+        impacts += out[0][4]["impacts"]
+        if out[0][2] or out[0][3]:
+            for e in envs:
+                e.reset()
+    assert impacts > 0 or kw["task"] != "impacts"
+
+
