@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import SolverSettings
-from ..physics.validation import as_state, check_inside
+from ..physics.validation import as_state, check_inside, real_array
 from .scene import Scene, Task, ConfigError
 from .tasks import task_constants
 
@@ -218,12 +218,7 @@ class Core:
 
     @staticmethod
     def _rows(value, n, width, name):
-        if value is None or isinstance(value, (str, bytes)):
-            raise TypeError(f"{name} must be an array of floats, got {type(value).__name__}")
-        arr = np.asarray(value)
-        if arr.dtype.kind not in "iuf":
-            raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
-        arr = arr.astype(np.float64)
+        arr = real_array(value, name, "an array")
         if arr.shape == (width,):
             arr = np.broadcast_to(arr, (n, width))
         if arr.shape != (n, width):
@@ -250,12 +245,7 @@ def check_actions(actions, shape, name="action"):
     """float64 array of the given shape from actions: a TypeError for a wrong type (strings,
     None, bools, complex numbers, objects), a ValueError naming the sub-env(s) for a wrong shape
     or non-finite entries. Nothing is clipped here (the step clips)."""
-    if actions is None or isinstance(actions, (str, bytes)):
-        raise TypeError(f"{name} must be an array of floats, got {type(actions).__name__}")
-    arr = np.asarray(actions)
-    if arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
-    arr = arr.astype(np.float64)
+    arr = real_array(actions, name, "an array")  # also finds a bool or string inside a list
     if arr.shape != shape:
         if len(shape) == 2 and shape[1] == 1 and arr.shape == shape[:1]:
             arr = arr[:, None]
