@@ -126,6 +126,8 @@ def run_job(job: dict, runs: str) -> dict:
     import csv
     from training.episodes import make_vector_env, run_episodes
     from training.runner import eval_seed, train_agent
+    import numba
+    numba.set_num_threads(1)  # one job per core (pool or Ray task): the vector env's prange would oversubscribe
     out = job_dir(runs, job)
     out.mkdir(parents=True, exist_ok=True)
     t0, c0 = time.perf_counter(), time.process_time()
