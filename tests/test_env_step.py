@@ -70,14 +70,15 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
 
 def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
     # physics.scalar.advance_m may stop after a bounded amount of work (elapsed < the time asked);
-    # the step calls it again until the control period is done: the same motion and impacts
+    # the step (through scalar.advance_through_m) calls it again until the period is done: the same motion and impacts
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
     rng = np.random.default_rng(3)
     calls = []
+    advance_m = scalar.advance_m
 
     def one_impact_per_call(s, acc1, acc2, dt, m, stop_after):
         calls.append(dt)
-        return scalar.advance_m(s, acc1, acc2, dt, m, 1)
+        return advance_m(s, acc1, acc2, dt, m, 1)
 
     checked = 0
     for s in _random_inside(rng, core.table, 20):
@@ -86,7 +87,7 @@ def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
         ref = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0, times0, ends0, 1)
         times0, ends0 = times0[1], ends0[1]
         with monkeypatch.context() as mp:
-            mp.setattr(functional, "advance_m", one_impact_per_call)
+            mp.setattr(scalar, "advance_m", one_impact_per_call)  # the step resumes it (scalar.advance_through_m)
             times1, ends1 = np.zeros((1, 200)), np.zeros((1, 200), dtype=np.int64)
             calls.clear()
             got = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0,

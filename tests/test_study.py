@@ -180,3 +180,32 @@ def test_failed_jobs_are_named():
     with pytest.raises(RuntimeError, match="PennyProbeDrive-Plane-v0 ppo seed 3: ValueError: boom"):
         study._raise_failed(["0: ValueError: boom"], jobs)
     study._raise_failed([], jobs)  # nothing failed: no error
+
+
+def test_readme_answer_is_the_reports():
+    """The README's two sentences are computed from the committed report's rows (docs/study.csv), not typed."""
+    from training.study_report import README_BEGIN, README_END, readme_answer
+    text = (study.ROOT / "README.md").read_text()
+    assert README_BEGIN in text and README_END in text
+    block = text.split(README_BEGIN, 1)[1].split(README_END, 1)[0].strip()
+    csv_path = study.ROOT / "docs" / "study.csv"
+    assert csv_path.is_file(), "docs/study.csv (the committed full run) is missing"
+    with open(csv_path) as f:
+        rows = list(csv.DictReader(f))
+    assert block == readme_answer(rows)
+    assert "impacts needed" in block or "impacts not needed" in block or "inconclusive" in block
+
+
+def test_readme_answer_follows_the_verdicts():
+    from training.study_report import readme_answer
+    def row(probe, table, agent, s, lo, hi, share=1.0):
+        return {"probe": probe, "table": table, "agent": agent, "success": s, "ci_low": lo, "ci_high": hi,
+                "episodes": 100, "impact_share": share}
+    rows = [row("Drive", "Plane", "ppo", 0.0, 0.0, 0.0), row("Drive", "Ellipse-Elastic", "ppo", 0.5, 0.4, 0.6),
+            row("Both", "Plane", "feedback", 1.0, 1.0, 1.0), row("Both", "Ellipse-Elastic", "ppo", 0.3, 0.2, 0.4, 0.5)]
+    text = readme_answer(rows)
+    assert "drive only, reach off the heading line: **impacts needed**" in text
+    assert "both controls, park: **impacts not needed**" in text
+    assert "15 of the trained agents' 30 successful table episodes" in text
+    rows[1].update(success=0.0, ci_low=0.0, ci_high=0.0)
+    assert "drive only, reach off the heading line: **inconclusive**" in readme_answer(rows)

@@ -101,6 +101,57 @@ def verdict(rows_of_probe: list[dict]) -> tuple[str, str]:
     return "inconclusive", f"{p}; {w}: no interval separates them and the plane is not shown solved"
 
 
+README_BEGIN = "<!-- study-answer: written by python -m training.study (training/study_report.py, readme_answer) -->"
+README_END = "<!-- /study-answer -->"
+
+
+def readme_answer(rows: list[dict], report: str = "docs/study.md") -> str:
+    """The README's two-sentence answer, computed from the report's rows (never typed): the verdicts of
+    the single-input probes, then the both-controls probe's verdict and how often the trained agents'
+    table successes used impacts. Rows are the report's (or its CSV's, numbers as strings)."""
+    rows = [{k: _num(v) for k, v in r.items()} for r in rows]
+    verdicts = {p: verdict([r for r in rows if r["probe"] == p]) for p in PROBES
+                if any(r["probe"] == p for r in rows)}
+
+    def said(probe):
+        v, why = verdicts[probe]
+        return f"{PROBES[probe]}: **{v}** ({why})"
+
+    single = [said(p) for p in ("Steer", "Drive") if p in verdicts]
+    first = ("Observed in the RL study ([" + report + "](" + report + ")), beyond the plane's proven invariants: "
+             + "; ".join(single) + ".") if single else ""
+    second = ""
+    if "Both" in verdicts:
+        rl = [r for r in rows if r["probe"] == "Both" and r["agent"] in ("ppo", "sac") and r["table"] != "Plane"
+              and r["success"] > 0]
+        n_succ = sum(r["success"] * r["episodes"] for r in rl)
+        n_imp = sum(r["success"] * r["episodes"] * r["impact_share"] for r in rl)
+        second = (f"With both controls ({said('Both')}), {n_imp:.0f} of the trained agents' {n_succ:.0f} successful "
+                  "table episodes used at least one impact.")
+    return " ".join(x for x in (first, second) if x)
+
+
+def _num(v):
+    """A CSV cell as a float where it is one (the rows read back from study.csv are strings)."""
+    if isinstance(v, str):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    return v
+
+
+def update_readme(readme: Path, answer: str) -> bool:
+    """Replace the text between README_BEGIN and README_END with answer; False if the markers are missing."""
+    text = readme.read_text()
+    if README_BEGIN not in text or README_END not in text:
+        return False
+    head, rest = text.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    readme.write_text(f"{head}{README_BEGIN}\n{answer}\n{README_END}{tail}")
+    return True
+
+
 def plot_curves(groups, path: Path, probe: str) -> bool:
     import matplotlib
     matplotlib.use("Agg")

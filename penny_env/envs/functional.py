@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import Model, advance_m, certified_free_trig, flow1
+from ..physics.scalar import Model, advance_through_m, certified_free_trig, flow1
 from .tasks import TaskConstants, on_arc, step_reward
 
 XP = SCALAR      # the math namespace of tasks.py's formulas (numba_math in the compiled copies)
@@ -120,30 +120,23 @@ def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends, ro
     times.shape[1] impacts go into row `row` of times and ends; the counts are exact.
 
     A period the certificate (scalar.certified_free_trig) shows free of impacts is one flow. Any
-    other goes through the physics' event loop advance_m, which may stop early to bound its work per
-    call (elapsed < the time asked): the loop resumes it from where it stopped until the period is
-    done, so the motion is that of one uninterrupted call."""
+    other goes through the physics' event loop over the whole period (scalar.advance_through_m: it
+    resumes the calls that the per-call event cap stopped early, so the motion is that of one
+    uninterrupted call)."""
     if p.plane or certified_free_trig(s, c_ph, s_ph, acc1, acc2, p.dt, m):
         return flow1(s, acc1, acc2, p.dt, m.R), 0, 0
-    n = 0
+    s, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, m)
     n_arc = 0
-    t0 = 0.0
     cap = times.shape[1]
-    while True:
-        rem = p.dt - t0
-        s, impacts, _, elapsed = advance_m(s, acc1, acc2, rem, m, 0)
-        for j in range(len(impacts)):
-            t_j, end, post = impacts[j]
-            sR = end * m.R
-            if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), arc_c, arc_s, k, XP):
-                n_arc += 1
-            if n < cap:
-                times[row, n] = t0 + t_j
-                ends[row, n] = end
-            n += 1
-        if not elapsed < rem or (elapsed <= 0.0 and len(impacts) == 0):
-            return s, n, n_arc
-        t0 += elapsed
+    for j in range(len(impacts)):
+        t_j, end, post = impacts[j]
+        sR = end * m.R
+        if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), arc_c, arc_s, k, XP):
+            n_arc += 1
+        if j < cap:
+            times[row, j] = t_j
+            ends[row, j] = end
+    return s, len(impacts), n_arc
 
 
 def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, k, times, ends, row):
@@ -280,7 +273,7 @@ def compiled_env_functions() -> dict:
     jit = numba.njit(cache=True)
     namespace = dict(vars(tasks))  # the task formulas' constants (REACH, PARK, IMPACTS)
     namespace.update(vars(functional), __builtins__=builtins, XP=numba_math, prange=numba.prange)
-    for name in ("certified_free_trig", "flow1", "advance_m"):
+    for name in ("certified_free_trig", "flow1", "advance_through_m"):
         namespace[name] = phys[name]
     for f in (tasks.on_arc, tasks.step_reward):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)

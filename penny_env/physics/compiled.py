@@ -347,18 +347,3 @@ class CompiledBatch:
             e[rows] = [imp[1] for imp in impacts]
             post[rows] = [imp[2] for imp in impacts]
         return out, (env, t, e, post)
-
-
-def advance_collect(advance_m, s, acc1, acc2, dt, m, stop_after=0):
-    """advance_m resumed while it stops early (its per-call work cap) and stop_after is not reached:
-    (state, impacts, rests, elapsed) over the whole interval, times since its start."""
-    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, stop_after)
-    impacts, rests = list(impacts), list(rests)
-    while elapsed < dt and not (stop_after > 0 and len(impacts) >= stop_after):
-        s, more, more_rests, e = advance_m(s, acc1, acc2, dt - elapsed, m, stop_after - len(impacts) if stop_after > 0 else 0)
-        impacts += [(t + elapsed, end, post) for t, end, post in more]
-        rests += [(t + elapsed, pinned) for t, pinned in more_rests]
-        if e == 0.0 and not more:
-            break
-        elapsed += e
-    return s, impacts, rests, elapsed

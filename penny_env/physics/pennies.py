@@ -1,6 +1,6 @@
 """The per-penny event loop (physics/scalar.py) run over the pennies of a (6, N) batch.
 
-One event loop exists: scalar.advance_m for one penny in plain floats. Here it runs over a batch,
+One event loop exists: scalar.advance_m (resumed by scalar.advance_through_m) for one penny in plain floats. Here it runs over a batch,
 either compiled and in parallel over the pennies (backend "numba", physics/compiled.py) or as
 plain Python (backend "python": the readable reference, for debugging and tests). Both give bitwise
 the same results (tests/test_compiled.py)."""
@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import CompiledBatch, advance_collect, choose_backend
-from .scalar import advance_m, first_impact_resumed, scalar_model
+from .compiled import CompiledBatch, choose_backend
+from .scalar import advance_through_m, first_impact_resumed, scalar_model
 
 # rounds of a first-impact search resumed after its step budget (settings.max_search_steps) is spent
 FIRST_IMPACT_ROUNDS = 64
@@ -75,8 +75,8 @@ def advance_pennies(S, acc1, acc2, dt, params, table, law, settings, stop_after=
     elapsed = np.zeros(n)
     rows, rest_rows = [], []
     for i in range(n):
-        s, impacts, rests, el = advance_collect(advance_m, tuple(float(v) for v in S[:, i]), float(acc1[i]),
-                                                float(acc2[i]), float(dts[i]), m, stop)
+        s, impacts, rests, el = advance_through_m(tuple(float(v) for v in S[:, i]), float(acc1[i]), float(acc2[i]),
+                                                  float(dts[i]), m, stop)
         out[:, i] = s
         elapsed[i] = el
         rows += [(i, t, e, post) for t, e, post in impacts]

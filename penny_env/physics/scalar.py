@@ -435,13 +435,16 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
             return s, impacts, rests, elapsed
 
 
-def advance_through_m(s, acc1, acc2, dt, m):
+def advance_through_m(s, acc1, acc2, dt, m, stop_after=0):
     """:func:`advance_m` over the whole interval: resumes after each call that the per-call event cap
-    stopped early. Returns (state, impacts, rests, dt) with the times counted from the interval's start."""
-    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, 0)
-    while elapsed < dt:
+    stopped early, so the motion is that of one uninterrupted call (the one resumption loop of the
+    package: the env step, the batch API and the renderer call it). Returns (state, impacts, rests,
+    elapsed) with the times counted from the interval's start; elapsed is dt, or less when stop_after
+    > 0 impacts were reached (the state is then the one right after that impact)."""
+    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, stop_after)
+    while elapsed < dt and not (stop_after > 0 and len(impacts) >= stop_after):
         rem = dt - elapsed
-        s, more, more_rests, step = advance_m(s, acc1, acc2, rem, m, 0)
+        s, more, more_rests, step = advance_m(s, acc1, acc2, rem, m, stop_after - len(impacts) if stop_after > 0 else 0)
         for k in range(len(more)):
             t_k, end_k, post_k = more[k]
             impacts.append((elapsed + t_k, end_k, post_k))
@@ -449,9 +452,10 @@ def advance_through_m(s, acc1, acc2, dt, m):
             t_k, pinned_k = more_rests[k]
             rests.append((elapsed + t_k, pinned_k))
         if not step < rem:  # reached the interval's end
+            elapsed = dt
             break
         elapsed += step
-    return s, impacts, rests, dt
+    return s, impacts, rests, elapsed
 
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------
