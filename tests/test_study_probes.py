@@ -98,3 +98,28 @@ def test_walls_break_the_invariants():
                 env.reset()
                 v0 = env.state[k]
         assert changed, env_id
+
+
+def test_park_probes_need_both_speeds_at_rest():
+    # the "come to rest (both speeds under tolerances)": a penny on the target with
+    # |R theta_dot| under speed_tolerance but spinning (|phi_dot| >= spin_tolerance) has not parked
+    for probe in ("Steer", "Both"):
+        env = gym.make(f"PennyProbe{probe}-Ellipse-Elastic-v0")
+        core = env.unwrapped._core
+        assert core.task.spin_tolerance == 0.5
+        for w, parked in ((0.0, True), (0.45, True), (0.6, False), (-3.0, False)):
+            env.reset(seed=1, options={"state": (0.0, 0.0, 0.0, 0.0, 0.0, w), "target": (0.0, 0.0)})
+            _, _, terminated, _, info = env.step(np.zeros(env.action_space.shape, np.float32))
+            assert terminated == parked and info["is_success"] == parked, (probe, w)
+    # PennyPark-* keep their rest as before: no spin bound
+    env = gym.make("PennyPark-Stadium-v0")
+    assert env.unwrapped._core.task.spin_tolerance is None
+    env.reset(seed=1, options={"state": (0.0, 0.0, 0.0, 0.0, 0.0, -3.0), "target": (0.0, 0.0)})
+    assert env.step(np.zeros(env.action_space.shape, np.float32))[2]
+
+
+@pytest.mark.parametrize("bad,err", [(0.0, ConfigError), (-1.0, ConfigError), (float("inf"), ConfigError),
+                                     ("0.5", ConfigError)])
+def test_spin_tolerance_validated(bad, err):
+    with pytest.raises(err, match="spin_tolerance"):
+        PennyEnv("ellipse", "park", spin_tolerance=bad)

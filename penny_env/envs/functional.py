@@ -158,7 +158,7 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     count = count + n_arc
     dx, dy = tx - s1[0], ty - s1[1]
     d = math.sqrt(dx * dx + dy * dy)
-    r, success = step_reward(k, d_prev, d, s1[4], ctrl, n_arc, count, XP)
+    r, success = step_reward(k, d_prev, d, s1[4], s1[5], ctrl, n_arc, count, XP)
     trig1 = angle_trig(s1)
     o = observe(s1, trig1, tx, ty, count, p)
     return s1, trig1, o, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps

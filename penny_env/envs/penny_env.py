@@ -86,6 +86,7 @@ class PennyEnv(gym.Env):
     * reach:   ``progress_weight (d_prev - d) / L - ctrl_cost ctrl + success_bonus [d < tolerance]``
     * park:    ``progress_weight (d_prev - d) / L - speed_cost v / (R obs_scale.theta_dot) [d < 2 tolerance]
       - ctrl_cost ctrl + success_bonus [success]``, success: d < tolerance and v < speed_tolerance
+      (and |phi_dot| < spin_tolerance where the task sets one: the probes' "both speeds at rest")
     * impacts: ``impact_reward n_arc - ctrl_cost ctrl + success_bonus [count >= impacts_goal]``;
       an impact is on the arc when its impact point is within arc_half_width (polar angle about
       the table's centre) of the arc's centre direction, drawn each episode.

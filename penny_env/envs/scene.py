@@ -221,6 +221,7 @@ class Task:
     max_episode_steps: episode length (truncation)
     tolerance:         [m] success radius around the target (reach, park)
     speed_tolerance:   [m/s] park: rolling speed |R theta_dot| below this counts as at rest
+    spin_tolerance:    [rad/s] park: and the turning rate |phi_dot| below this (None: not checked)
     target_fraction:   targets are uniform in this fraction of the spawn ellipse (reach, park)
     progress_weight:   weight of the progress term (d_prev - d) / L (reach, park)
     speed_cost:        park: weight of the speed penalty |R theta_dot| / (R obs_scale.theta_dot) near the target
@@ -239,6 +240,7 @@ class Task:
     max_episode_steps: int = 400
     tolerance: float = 0.02
     speed_tolerance: float = 0.01
+    spin_tolerance: float | None = None
     target_fraction: float = 0.6
     progress_weight: float = 10.0
     speed_cost: float = 0.1
@@ -259,6 +261,8 @@ class Task:
                 raise ConfigError(f"{o}.{name} must be a positive integer, got {v!r}")
         object.__setattr__(self, "tolerance", _num(o, "tolerance", self.tolerance, positive=True))
         object.__setattr__(self, "speed_tolerance", _num(o, "speed_tolerance", self.speed_tolerance, positive=True))
+        if self.spin_tolerance is not None:
+            object.__setattr__(self, "spin_tolerance", _num(o, "spin_tolerance", self.spin_tolerance, positive=True))
         object.__setattr__(self, "target_fraction", _num(o, "target_fraction", self.target_fraction, nonneg=True, hi=1.0))
         for name in ("progress_weight", "speed_cost", "ctrl_cost", "success_bonus", "impact_reward"):
             object.__setattr__(self, name, _num(o, name, getattr(self, name), nonneg=True))

@@ -12,7 +12,8 @@ task      reward per step                                                       
 ========  ==========================================================================  ==================================
 reach     progress_weight (d_prev - d) / L - ctrl_cost ctrl + success_bonus [success]  d < tolerance
 park      progress_weight (d_prev - d) / L - speed_cost v / v_ref [d < 2 tolerance]    d < tolerance and v < speed_tolerance
-          - ctrl_cost ctrl + success_bonus [success]   (v_ref = R obs_scale.theta_dot)
+          - ctrl_cost ctrl + success_bonus [success]   (v_ref = R obs_scale.theta_dot)      (and |phi_dot| < spin_tolerance
+                                                                                       when the task sets one)
 impacts   impact_reward n_arc - ctrl_cost ctrl + success_bonus [success]               count >= impacts_goal
 ========  ==========================================================================  ==================================
 
@@ -40,6 +41,7 @@ class TaskConstants(NamedTuple):
     tol: float
     tol2: float
     vtol: float
+    wtol: float      # |phi_dot| bound of park's rest (inf: not checked)
     pw: float
     sc: float
     cc: float
@@ -55,7 +57,8 @@ class TaskConstants(NamedTuple):
 def task_constants(scene, task, L) -> TaskConstants:
     return TaskConstants(
         kind=KIND_CODE[task.kind], L=float(L), tol=float(task.tolerance), tol2=2.0 * task.tolerance,
-        vtol=float(task.speed_tolerance), pw=float(task.progress_weight), sc=float(task.speed_cost),
+        vtol=float(task.speed_tolerance),
+        wtol=math.inf if task.spin_tolerance is None else float(task.spin_tolerance), pw=float(task.progress_weight), sc=float(task.speed_cost),
         cc=float(task.ctrl_cost), bonus=float(task.success_bonus), ir=float(task.impact_reward),
         goal=int(task.impacts_goal), R=float(scene.params["R"]), v_ref=scene.params["R"] * scene.obs_scale["theta_dot"],
         all_arc=bool(task.arc_half_width >= math.pi), cos_hw=math.cos(min(task.arc_half_width, math.pi)))
@@ -68,8 +71,8 @@ def on_arc(px, py, cb, sb, k: TaskConstants, xp=SCALAR):
     return px * cb + py * sb >= k.cos_hw * xp.sqrt(px * px + py * py)
 
 
-def step_reward(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count, xp=SCALAR):
-    """(reward, success) of one step."""
+def step_reward(k: TaskConstants, d_prev, d, W, w, ctrl, n_arc, count, xp=SCALAR):
+    """(reward, success) of one step; W, w: theta_dot and phi_dot after it."""
     if k.kind == IMPACTS:
         success = count >= k.goal
         return k.ir * n_arc - k.cc * ctrl + k.bonus * success, success
@@ -78,6 +81,6 @@ def step_reward(k: TaskConstants, d_prev, d, W, ctrl, n_arc, count, xp=SCALAR):
         success = d < k.tol
         return progress - k.cc * ctrl + k.bonus * success, success
     v = xp.abs(k.R * W)
-    success = (d < k.tol) & (v < k.vtol)
+    success = (d < k.tol) & (v < k.vtol) & (xp.abs(w) < k.wtol)
     r = progress - k.sc * (v / k.v_ref) * (d < k.tol2) - k.cc * ctrl + k.bonus * success
     return r, success
