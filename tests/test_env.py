@@ -277,3 +277,24 @@ def test_options_state_validated():
     with pytest.raises(ValueError, match="unknown"):
         env.reset(options={"velocity": 1})
     env.reset(seed=0)
+
+
+@pytest.mark.parametrize("kwargs,field", [
+    ({"tolerance": "0.5"}, "task.tolerance"), ({"max_episode_steps": 10.5}, "task.max_episode_steps"),
+    ({"kind": 3}, "task.kind"), ({"actuation": ["both"]}, "scene.actuation"), ({"params": [1, 2]}, "scene.params"),
+    ({"table": 0.2}, "scene.table"), ({"table": {"kind": "ellipse", "a": "0.1", "b": 0.2}}, "scene.table"),
+    ({"init": {"theta_dot": "fast"}}, "scene.init.theta_dot"), ({"spin_tolerance": True}, "task.spin_tolerance"),
+])
+def test_config_wrong_type_is_a_type_error_naming_the_field(kwargs, field):
+    # a wrong type is a TypeError (ConfigTypeError: also a ConfigError, so a ValueError); a bad value stays a plain
+    # ConfigError (ValueError, not TypeError)
+    from penny_env.envs import ConfigTypeError
+    with pytest.raises(ConfigTypeError, match=field.replace(".", r"\.")) as info:
+        PennyEnv("ellipse", "park", **kwargs)
+    assert isinstance(info.value, TypeError) and isinstance(info.value, ConfigError)
+    with pytest.raises(ConfigError) as info:
+        PennyEnv("ellipse", "park", tolerance=-1.0)
+    assert not isinstance(info.value, TypeError)
+    with pytest.raises(ConfigError) as info:
+        PennyEnv("ellipse", "park", max_episode_steps=0)
+    assert not isinstance(info.value, TypeError)

@@ -119,7 +119,7 @@ def test_park_probes_need_both_speeds_at_rest():
 
 
 @pytest.mark.parametrize("bad,err", [(0.0, ConfigError), (-1.0, ConfigError), (float("inf"), ConfigError),
-                                     ("0.5", ConfigError)])
+                                     ("0.5", TypeError)])
 def test_spin_tolerance_validated(bad, err):
     with pytest.raises(err, match="spin_tolerance"):
         PennyEnv("ellipse", "park", spin_tolerance=bad)

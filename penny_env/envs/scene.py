@@ -13,6 +13,7 @@ every override key must be a field of one of them (nested dict fields such as ``
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -32,10 +33,20 @@ class ConfigError(ValueError):
     """An invalid scene/task configuration; the message names the field."""
 
 
+class ConfigTypeError(ConfigError, TypeError):
+    """A configuration field of the wrong type (a string for a number, a list for a mapping): a
+    ConfigError, and a TypeError as the rest of the package raises for a wrong type."""
+
+
 class UnknownFieldError(ConfigError, TypeError):
     """A field (or keyword argument) that the scene and task do not have: a ConfigError, and a
     TypeError as Python raises for an unexpected keyword argument (tools such as TorchRL probe
     keywords that way)."""
+
+
+def _config_error(exc, message):
+    """The ConfigError for a table or law error: a ConfigTypeError where the cause was a TypeError."""
+    return ConfigTypeError(message) if isinstance(exc, TypeError) else ConfigError(message)
 
 
 def _num(owner: str, name: str, value, *, positive=False, nonneg=False, lo=None, hi=None) -> float:
@@ -47,7 +58,7 @@ def _num(owner: str, name: str, value, *, positive=False, nonneg=False, lo=None,
             else:
                 raise TypeError
         except TypeError:
-            raise ConfigError(f"{owner}.{name} must be a number, got {value!r}") from None
+            raise ConfigTypeError(f"{owner}.{name} must be a number, got {value!r}") from None
     value = float(value)
     if not math.isfinite(value):
         raise ConfigError(f"{owner}.{name} must be finite, got {value!r}")
@@ -66,7 +77,9 @@ def _range(owner: str, name: str, value) -> tuple[float, float]:
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         v = _num(owner, name, value)
         return (v, v)
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
+    if not isinstance(value, (list, tuple)):
+        raise ConfigTypeError(f"{owner}.{name} must be a number or a [low, high] pair, got {value!r}")
+    if len(value) != 2:
         raise ConfigError(f"{owner}.{name} must be a number or a [low, high] pair, got {value!r}")
     lo, hi = (_num(owner, f"{name}[{i}]", v) for i, v in enumerate(value))
     if lo > hi:
@@ -76,7 +89,7 @@ def _range(owner: str, name: str, value) -> tuple[float, float]:
 
 def _keys(owner: str, value, allowed: dict) -> dict:
     if not isinstance(value, dict):
-        raise ConfigError(f"{owner} must be a mapping, got {type(value).__name__}")
+        raise ConfigTypeError(f"{owner} must be a mapping, got {type(value).__name__}")
     unknown = sorted(set(value) - set(allowed))
     if unknown:
         raise UnknownFieldError(f"{owner}: unknown field(s) {unknown}; allowed: {sorted(allowed)}")
@@ -132,18 +145,20 @@ class Scene:
         if table is None:
             table = {"kind": "none"}
         if isinstance(table, (str, int, float, list, tuple)):
-            raise ConfigError(f"{o}.table must be a mapping with a 'kind' or a table object, got {table!r}")
+            raise ConfigTypeError(f"{o}.table must be a mapping with a 'kind' or a table object, got {table!r}")
         try:
             t = make_table(dict(table) if isinstance(table, dict) else table)
         except (ValueError, TypeError) as exc:
-            raise ConfigError(f"{o}.table: {exc}") from None
+            raise _config_error(exc, f"{o}.table: {exc}") from None
         # a dict spec is kept as given (YAML, repr); a table object is kept as the checked Table
         object.__setattr__(self, "table", dict(table) if isinstance(table, dict) else t)
         try:
             law = make_law(self.law)
         except (ValueError, TypeError) as exc:
-            raise ConfigError(f"{o}.law: {exc}") from None
+            raise _config_error(exc, f"{o}.law: {exc}") from None
         object.__setattr__(self, "law", law.kind if law.kind != "restitution" else law.e)
+        if not isinstance(self.actuation, str):
+            raise ConfigTypeError(f"{o}.actuation must be a string, one of {sorted(ACTUATIONS)}, got {self.actuation!r}")
         if self.actuation not in ACTUATIONS:
             raise ConfigError(f"{o}.actuation must be one of {sorted(ACTUATIONS)}, got {self.actuation!r}")
         p = _keys(f"{o}.params", self.params, PARAM_DEFAULTS)
@@ -253,12 +268,17 @@ class Task:
 
     def __post_init__(self):
         o = "task"
+        if not isinstance(self.kind, str):
+            raise ConfigTypeError(f"{o}.kind must be a string, one of {list(TASK_KINDS)}, got {self.kind!r}")
         if self.kind not in TASK_KINDS:
             raise ConfigError(f"{o}.kind must be one of {list(TASK_KINDS)}, got {self.kind!r}")
         for name in ("max_episode_steps", "impacts_goal"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+                raise ConfigTypeError(f"{o}.{name} must be a positive integer, got {v!r}")
+            if v < 1:
                 raise ConfigError(f"{o}.{name} must be a positive integer, got {v!r}")
+            object.__setattr__(self, name, int(v))
         object.__setattr__(self, "tolerance", _num(o, "tolerance", self.tolerance, positive=True))
         object.__setattr__(self, "speed_tolerance", _num(o, "speed_tolerance", self.speed_tolerance, positive=True))
         if self.spin_tolerance is not None:
@@ -287,7 +307,7 @@ def _yaml_load(path: Path) -> dict:
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: the top level must be a mapping, got {type(data).__name__}")
+        raise ConfigTypeError(f"{path}: the top level must be a mapping, got {type(data).__name__}")
     return data
 
 
@@ -306,7 +326,7 @@ def _preset(kind: str, name) -> dict:
             names = sorted(q.stem for q in (CONFIG_DIR / f"{kind}s").glob("*.yaml"))
             raise ConfigError(f"unknown {kind} preset {str(name)!r}; presets: {names} (or a path to a .yaml file)")
         return _yaml_load(path)
-    raise ConfigError(f"{kind} must be a preset name, a .yaml path, a dict or a {kind.title()}, got {type(name).__name__}")
+    raise ConfigTypeError(f"{kind} must be a preset name, a .yaml path, a dict or a {kind.title()}, got {type(name).__name__}")
 
 
 def _merge(base: dict, over: dict, owner: str, allowed: tuple) -> dict:

@@ -43,4 +43,6 @@ def make_table(spec) -> Table | None:
     try:
         return TABLE_KINDS[kind](**spec)
     except TypeError as exc:
-        raise ValueError(f"table ({kind}): {exc}") from None
+        if "keyword argument" in str(exc) or "required positional argument" in str(exc):
+            raise ValueError(f"table ({kind}): {exc}") from None  # an unknown or missing field: a bad spec
+        raise TypeError(f"table ({kind}): {exc}") from None       # a field of the wrong type
