@@ -173,6 +173,25 @@ def test_evaluate_run_dir_with_video(quick_pool, tmp_path):
     from PIL import Image
     with Image.open(tmp_path / "a.gif") as im:
         assert im.n_frames > 10
+    assert res["gif_seed"] == res["seed"]
+
+
+@pytest.mark.slow
+def test_gif_success_shows_the_first_successful_episode(quick_pool, tmp_path, monkeypatch):
+    pytest.importorskip("pygame", reason="rgb_array rendering")
+    import training.episodes
+    import training.evaluate as ev
+    runs, _ = quick_pool
+    run = runs / "PennyProbeDrive-Ellipse-Elastic-v0" / "ppo" / "seed0"
+    real = training.episodes.run_episodes
+
+    def third_succeeds(env_id, policy, episodes, seed):
+        r = real(env_id, policy, episodes, seed)
+        r["success"] = [j == 2 for j in range(episodes)]
+        return r
+    monkeypatch.setattr(training.episodes, "run_episodes", third_succeeds)
+    res = ev.evaluate_run(run, episodes=4, video_episodes=0, gif=str(tmp_path / "b.gif"), gif_success=True)
+    assert res["gif_seed"] == res["seed"] + 2 and res["gif_success"] and (tmp_path / "b.gif").is_file()
 
 
 def test_failed_jobs_are_named():
@@ -209,3 +228,18 @@ def test_readme_answer_follows_the_verdicts():
     assert "15 of the trained agents' 30 successful table episodes" in text
     rows[1].update(success=0.0, ci_low=0.0, ci_high=0.0)
     assert "drive only, reach off the heading line: **inconclusive**" in readme_answer(rows)
+
+
+def test_paired_times_pair_the_same_draws():
+    from training.study_report import paired_times
+    def res(cell, agent, seed, success, time):
+        return {"job": {"cell": cell, "agent": agent, "seed": seed},
+                "episodes": {"success": success, "time": time}}
+    plane, table = "PennyProbeBoth-Plane-v0", "PennyProbeBoth-Stadium-Elastic-v0"
+    groups = {(plane, "ppo"): [res(plane, "ppo", 0, [True, True, False, True], [3.0, 2.0, 9.0, 4.0])],
+              (table, "ppo"): [res(table, "ppo", 0, [True, False, True, True], [1.0, 9.0, 1.0, 5.0])],
+              (table, "sac"): [res(table, "sac", 0, [True] * 4, [1.0] * 4)]}  # no plane sac: not paired
+    rows = paired_times(groups, "Both")
+    assert len(rows) == 1 and rows[0]["agent"] == "ppo" and rows[0]["pairs"] == 2  # episodes 0 and 3
+    assert rows[0]["mean_diff_s"] == pytest.approx(((1 - 3) + (5 - 4)) / 2)
+    assert rows[0]["table_faster"] == 0.5 and rows[0]["ci_low"] <= rows[0]["mean_diff_s"] <= rows[0]["ci_high"]

@@ -1,13 +1,15 @@
 """Evaluate a saved run: success rate with its 95 % interval, and a video of a few episodes.
 
-    python -m training.evaluate RUN_DIR [--episodes 100] [--seed S] [--video-episodes 3] [--no-video] [--gif PATH]
+    python -m training.evaluate RUN_DIR [--episodes 100] [--seed S] [--video-episodes 3] [--no-video]
+                                        [--gif PATH [--gif-success]]
 
 RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip; every
 (cell, agent, seed) folder of training.study for PPO/SAC). Episodes are deterministic-policy
 episodes on fresh seeds (default: the run's evaluation seeds). The interval is Wilson's score
 interval for a binomial proportion. Videos (gymnasium RecordVideo, needs moviepy and pygame)
-go to RUN_DIR/videos/; results to RUN_DIR/evaluation.json. --gif writes the first video episode as
-an animated GIF too (Pillow, every other frame), e.g. for the docs.
+go to RUN_DIR/videos/; results to RUN_DIR/evaluation.json. --gif writes one episode as an animated
+GIF (Pillow, every other frame; needs pygame only), e.g. for the docs: the first evaluation episode,
+or with --gif-success the first one that succeeded (the first one if none did).
 """
 from __future__ import annotations
 
@@ -30,14 +32,13 @@ def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def record_video(env_id: str, model, folder: Path, episodes: int, seed: int, gif: Path | None = None) -> list[str]:
+def record_video(env_id: str, model, folder: Path, episodes: int, seed: int) -> list[str]:
+    """MP4s of `episodes` deterministic episodes from seeds seed, seed + 1, ... (RecordVideo)."""
     import gymnasium as gym
     from gymnasium.wrappers import RecordVideo
     import penny_env  # noqa: F401
     env = RecordVideo(gym.make(env_id, render_mode="rgb_array"), str(folder), episode_trigger=lambda e: True,
                       name_prefix="episode", disable_logger=True)
-    fps = env.metadata.get("render_fps", 20)
-    frames = []
     for e in range(episodes):
         obs, _ = env.reset(seed=seed + e)
         done = False
@@ -45,19 +46,33 @@ def record_video(env_id: str, model, folder: Path, episodes: int, seed: int, gif
             action, _ = model.predict(obs, deterministic=True)
             obs, _, term, trunc, _ = env.step(action)
             done = term or trunc
-            if gif is not None and e == 0:
-                frames.append(env.unwrapped.render())
     env.close()
-    if gif is not None:
-        from PIL import Image
-        images = [Image.fromarray(f) for f in frames[::2]]
-        Path(gif).parent.mkdir(parents=True, exist_ok=True)
-        images[0].save(gif, save_all=True, append_images=images[1:], duration=int(2000 / fps), loop=0)
     return sorted(str(p) for p in folder.glob("*.mp4"))
 
 
+def write_gif(env_id: str, model, path: Path, seed: int) -> int:
+    """An animated GIF of one deterministic episode from `seed` (every other frame); returns its frame count."""
+    import gymnasium as gym
+    from PIL import Image
+    import penny_env  # noqa: F401
+    env = gym.make(env_id, render_mode="rgb_array")
+    fps = env.metadata.get("render_fps", 20)
+    obs, _ = env.reset(seed=seed)
+    frames, done = [env.render()], False
+    while not done:
+        action, _ = model.predict(obs, deterministic=True)
+        obs, _, term, trunc, _ = env.step(action)
+        done = term or trunc
+        frames.append(env.render())
+    env.close()
+    images = [Image.fromarray(f) for f in frames[::2]]
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(2000 / fps), loop=0)
+    return len(images)
+
+
 def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_episodes: int = 3,
-                 gif: str | None = None) -> dict:
+                 gif: str | None = None, gif_success: bool = False) -> dict:
     from training.episodes import run_episodes
     from training.runner import eval_seed, load_run
     run_dir = Path(run_dir)
@@ -72,10 +87,11 @@ def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_ep
            "success_rate": k / episodes, "ci95_wilson": [lo, hi], "mean_return": float(np.mean(r["return"])),
            "mean_impacts": float(np.mean(r["impacts"]))}
     if video_episodes > 0:
-        res["videos"] = record_video(cfg["env_id"], model, run_dir / "videos", video_episodes, seed,
-                                     Path(gif) if gif else None)
-        if gif:
-            res["gif"] = str(gif)
+        res["videos"] = record_video(cfg["env_id"], model, run_dir / "videos", video_episodes, seed)
+    if gif:
+        first = next((j for j, ok in enumerate(r["success"]) if ok), 0) if gif_success else 0
+        write_gif(cfg["env_id"], model, Path(gif), seed + first)
+        res["gif"], res["gif_seed"], res["gif_success"] = str(gif), seed + first, bool(r["success"][first])
     (run_dir / "evaluation.json").write_text(json.dumps(res, indent=2))
     return res
 
@@ -87,19 +103,22 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=None)
     ap.add_argument("--video-episodes", type=int, default=3)
     ap.add_argument("--no-video", action="store_true")
-    ap.add_argument("--gif", default=None, help="also write the first video episode as an animated GIF here")
+    ap.add_argument("--gif", default=None, help="also write an episode as an animated GIF here (the first one)")
+    ap.add_argument("--gif-success", action="store_true", help="the GIF shows the first episode that succeeded")
     args = ap.parse_args(argv)
     try:
         res = evaluate_run(args.run_dir, args.episodes, args.seed, 0 if args.no_video else args.video_episodes,
-                           args.gif)
+                           args.gif, args.gif_success)
     except ValueError as exc:
         ap.error(str(exc))
     lo, hi = res["ci95_wilson"]
     print(f"{res['algo'].upper()} on {res['env_id']}: success {res['success_rate']:.3f} "
           f"(95 % Wilson interval [{lo:.3f}, {hi:.3f}]) over {res['episodes']} episodes from seed {res['seed']}; "
           f"mean return {res['mean_return']:.2f}")
-    for v in res.get("videos", []) + ([res["gif"]] if "gif" in res else []):
+    for v in res.get("videos", []):
         print("video:", v)
+    if "gif" in res:
+        print(f"gif: {res['gif']} (episode seed {res['gif_seed']}, {'a success' if res['gif_success'] else 'not a success'})")
     return res
 
 

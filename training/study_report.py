@@ -101,6 +101,41 @@ def verdict(rows_of_probe: list[dict]) -> tuple[str, str]:
     return "inconclusive", f"{p}; {w}: no interval separates them and the plane is not shown solved"
 
 
+def paired_times(groups, probe: str = "Both") -> list[dict]:
+    """Table vs plane on the same start/target pairs: a seed draws the same uniforms in every cell
+    (docs/study_probes.md), so evaluation episode j of job seed k is the same pair, scaled to each
+    table, in every cell of a probe. Per (table, agent): the pairs that both the table cell and the
+    plane cell solved, the mean time difference table - plane with its 95 % percentile bootstrap
+    interval over those pairs, and the share of them where the table was faster."""
+    plane = {a: {r["job"]["seed"]: r["episodes"] for r in res}
+             for (c, a), res in groups.items() if split_cell(c) == (probe, "Plane")}
+    out = []
+    for (cell, agent), results in sorted(groups.items()):
+        pr, table = split_cell(cell)
+        if pr != probe or table == "Plane" or agent not in plane:
+            continue
+        diffs = []
+        for r in results:
+            ref = plane[agent].get(r["job"]["seed"])
+            if ref is None:
+                continue
+            ep = r["episodes"]
+            for j in range(min(len(ep["success"]), len(ref["success"]))):
+                if ep["success"][j] and ref["success"][j]:
+                    diffs.append(ep["time"][j] - ref["time"][j])
+        d = np.array(diffs, float)
+        row = {"table": table, "agent": agent, "pairs": int(d.size), "mean_diff_s": float("nan"),
+               "ci_low": float("nan"), "ci_high": float("nan"), "table_faster": float("nan")}
+        if d.size:
+            rng = np.random.default_rng(0)
+            means = d[rng.integers(0, d.size, (B, d.size))].mean(axis=1)
+            lo, hi = np.percentile(means, [2.5, 97.5])
+            row.update(mean_diff_s=float(d.mean()), ci_low=float(lo), ci_high=float(hi),
+                       table_faster=float((d < 0).mean()))
+        out.append(row)
+    return out
+
+
 README_BEGIN = "<!-- study-answer: written by python -m training.study (training/study_report.py, readme_answer) -->"
 README_END = "<!-- /study-answer -->"
 
@@ -198,6 +233,21 @@ def _fmt(v, spec=".2f"):
     return format(v, spec) if isinstance(v, float) else str(v)
 
 
+def jobs_span(jobs, runs, groups):
+    """(first start, last end, seconds) of the jobs, from their result.json's modification times
+    minus their durations: the wall time of the study across invocations (a rerun skips finished jobs)."""
+    import datetime as dt
+    from training.study import job_dir
+    ends, starts = [], []
+    by_key = {(r["job"]["cell"], r["job"]["agent"], r["job"]["seed"]): r for res in groups.values() for r in res}
+    for job in jobs:
+        end = (job_dir(runs, job) / "result.json").stat().st_mtime
+        ends.append(end)
+        starts.append(end - by_key[(job["cell"], job["agent"], job["seed"])]["seconds"])
+    fmt = lambda t: dt.datetime.fromtimestamp(t, dt.timezone.utc).strftime("%Y-%m-%d %H:%M")  # noqa: E731
+    return fmt(min(starts)), fmt(max(ends)), max(ends) - min(starts)
+
+
 def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
     from penny_env.analysis.common import header
     out = Path(out)
@@ -211,8 +261,10 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
     job_seconds = sum(r["seconds"] for res in groups.values() for r in res)
     cpu_seconds = sum(r.get("cpu_seconds", 0.0) for res in groups.values() for r in res)
     lines = header("Does controllability of the penny need impacts? (RL study)", "training.study", list(argv))
-    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU), wall time of this "
-              f"invocation {seconds:.0f} s. Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
+    span = jobs_span(jobs, runs, groups)
+    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU); "
+              f"the jobs ran from {span[0]} to {span[1]} UTC ({span[2] / 60:.0f} min, from their result files); wall "
+              f"time of this invocation {seconds:.0f} s (finished jobs are not rerun). Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
               f"budgets {cfg['timesteps']} env steps. Probe tasks: [study_probes.md](study_probes.md).", ""]
     lines += ["## Proven (not observed)", "",
               "- On the open plane with u2 = 0 (steer only), (I + m R^2) theta'' = 0: theta_dot is conserved, so the "
@@ -248,6 +300,18 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
                          f"on the plane")
             if wall_t:
                 lines[-1] += f", {min(wall_t):.2f} to {max(wall_t):.2f} s on the tables (per cell and agent)"
+    paired = paired_times(groups, "Both")
+    if paired:
+        lines += ["", "Both controls, table vs plane on the same start/target pairs (episode j of job seed k is the "
+                  "same draw in every cell): pairs that both cells solved, mean time to success on the table minus "
+                  "on the plane with its 95 % bootstrap interval (over pairs; negative: the table is faster), and the "
+                  "share of those pairs where the table was faster.", "",
+                  "| table | agent | pairs solved in both | time table - plane [s] [95 % CI] | table faster |",
+                  "| --- | --- | ---: | --- | ---: |"]
+        for r in paired:
+            diff = (f"{r['mean_diff_s']:+.2f} [{r['ci_low']:+.2f}, {r['ci_high']:+.2f}]" if r["pairs"] else "-")
+            share = f"{r['table_faster']:.2f}" if r["pairs"] else "-"
+            lines.append(f"| {r['table']} | {r['agent']} | {r['pairs']} | {diff} | {share} |")
     lines += ["", "## Observed, per cell", "",
               "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % two-level "
               "bootstrap interval (seeds, then episodes; 2000 resamples). time: mean time to success [s]. impact "
