@@ -60,7 +60,95 @@ def test_quick_run_writes_report_outside_docs(tmp_path):
     out = oc.main(["--quick", "--workers", "2", "--out", str(tmp_path / "oc.md")])
     text = out.read_text()
     assert "| ellipse | reach | effort | both | 2 |" in text and "Failed solves" in text
+    # the multiple-shooting cross-check ran on the first pair, both variants, and found the same optima
+    assert "2 solves compared, 2 converged with both methods, 2 of those with the same optimal effort" in text
+    assert (tmp_path / "rows.pkl").is_file()
+    again = oc.main(["--quick", "--report-only", "--out", str(tmp_path / "oc.md")]).read_text()
+    assert again.split("- date:")[0] == text.split("- date:")[0] and "| ellipse | reach | effort" in again
     with pytest.raises(SystemExit):
         oc.main(["--quick", "--out", str(oc.Path(oc.__file__).resolve().parents[1] / "docs" / "x.md")])
     with pytest.raises(SystemExit):
         oc.main(["--pairs", "0"])
+    with pytest.raises(SystemExit):
+        oc.main(["--cross-check-pairs", "-1"])
+    with pytest.raises(SystemExit, match="no saved solves"):
+        oc.main(["--quick", "--report-only", "--out", str(tmp_path / "empty" / "oc.md")])
+
+
+@pytest.mark.parametrize("impacts", [True, False])
+def test_multiple_shooting_derivatives_match_finite_differences(impacts):
+    """d(final, defects, wall samples)/dz of the shooting functions, z = (torques, node states), against central
+    differences; rolling into the wall, so that with impacts allowed the second segment, which starts at a
+    node, holds an impact."""
+    import penny_env as pe
+    from training.shooting import MultipleShooting
+    s, target = np.array([0.10, 0.0, 0.0, 0.0, 5.0, 0.3]), np.array([0.0, 0.05])
+    prob = oc.Problem("ellipse", "park", s, target, impacts=impacts)
+    v = np.random.default_rng(1).uniform(-1, 1, (25, 2))
+    tr = pe.simulate(s, params=prob.params, table=prob.table, law=prob.law, controls=v * prob.limits, control_dt=prob.dt)
+    assert tr.n_impacts == 1 and 10 * prob.dt < tr.impact_times[0] < 20 * prob.dt
+    rng = np.random.default_rng(2)
+    ms = MultipleShooting(prob, 25, segment_rows=10)
+    assert ms.S == 3 and ms.n == 50 + 12
+    z = ms.initial(v)
+    # nodes start on the table's trajectory: no defects, but for the free flow (impacts forbidden) after the impact
+    start_defects = ms.evaluate(z)[2]
+    assert np.abs(start_defects if impacts else start_defects[:6]).max() < 1e-9
+    z[ms.nv:] += rng.normal(0.0, 1e-3, ms.n - ms.nv)
+    final, dfinal, defects, ddef, h, dh, valid, _ = ms.evaluate(z)
+    assert valid and np.abs(defects).max() > 1e-5 and (h is None) == impacts
+    eps = 1e-6
+    for i in range(ms.n):
+        zp, zm = z.copy(), z.copy()
+        zp[i] += eps
+        zm[i] -= eps
+        p, m = ms.evaluate(zp), ms.evaluate(zm)
+        for k, d in ((0, dfinal), (2, ddef)) + (() if impacts else ((4, dh),)):
+            fd = (p[k] - m[k]) / (2 * eps)
+            assert np.allclose(fd, d[:, i], rtol=1e-5, atol=1e-7 * max(1.0, np.abs(d).max())), (k, i)
+
+
+def test_method_is_checked():
+    with pytest.raises(ValueError, match="segment_rows"):
+        oc.Problem("ellipse", "reach", START, [0.0, 0.05], impacts=True, segment_rows=0)
+    from training.shooting import segment_bounds
+    assert segment_bounds(25, 10) == [0, 10, 20, 25] and segment_bounds(25, None) == [0, 25]
+
+
+def _parked_row(prob, sol):
+    return {"scene": prob.scene, "task": "park", "objective": "time", "pair": 0, "actuation": "both",
+            "start": prob.start, "target": prob.target, "with": sol, "without": sol}
+
+
+def test_the_probe_cells_pose_the_same_park_problems():
+    from training import optimal_vs_rl as ovr
+    for scene, cell in ovr.CELLS.items():
+        assert ovr.mismatch(scene, cell) == ""
+    assert "law" in ovr.mismatch("ellipse", "PennyProbeBoth-Ellipse-Plastic-v0")
+    assert "table" in ovr.mismatch("ellipse", ovr.CELLS["stadium"])
+
+
+def test_agents_run_from_the_optimal_control_pairs(tmp_path):
+    """The comparison's episodes start from the pairs' own states and targets (reset options): zero torque from
+    a penny parked on its target succeeds in one row; from a pair 0.1 m away it never does."""
+    pytest.importorskip("stable_baselines3", reason="the study's agents are SB3 models")
+    from training import optimal_vs_rl as ovr
+    from training.policies import zero_policy
+    from training.runner import train_agent
+
+    near = oc.Problem("ellipse", "park", START, [0.0, 0.0], impacts=True)
+    far = oc.Problem("ellipse", "park", START, [0.0, 0.1], impacts=True)
+    sol = oc.minimum_time(near, max_rows=4, maxiter=50)
+    rows = [_parked_row(near, sol), dict(_parked_row(far, sol), pair=1)]
+    eps = ovr.episodes_on_pairs(ovr.CELLS["ellipse"], zero_policy(2), ovr.park_pairs(rows, "ellipse"))
+    assert eps["success"] == [True, False] and eps["time"][0] == pytest.approx(0.05)
+    cell = ovr.CELLS["ellipse"]
+    train_agent(tmp_path / cell / "ppo" / "seed0", cell, "ppo", 0, 128, 2,
+                {"n_steps": 64, "batch_size": 64, "n_epochs": 1}, 1, 2)
+    results, notes = ovr.compare(rows, tmp_path)
+    agents = [r["agent"] for r in results]
+    assert agents == ["ppo", "feedback"] and notes == []  # no stadium rows: nothing to compare there
+    ppo = results[0]
+    assert ppo["episodes"] == 2 and ppo["seeds"] == 1 and 0.0 <= ppo["success"] <= 1.0
+    text = "\n".join(ovr.markdown(results, notes, tmp_path))
+    assert "| ellipse | ppo | 1 | 2 |" in text and "| ellipse | feedback | 1 | 2 |" in text

@@ -1,6 +1,8 @@
 """Does the optimal penny need impacts? Trajectory optimisation with exact derivatives through impacts.
 
-    python -m training.optimal_control [--quick] [--pairs 50] [--workers 16] [--out docs/optimal_control.md]
+    python -m training.optimal_control [--quick] [--pairs 50] [--single-input-pairs 10] [--cross-check-pairs 10]
+                                       [--workers 16] [--out docs/optimal_control.md] [--runs runs/optimal_control]
+                                       [--study-runs runs/study] [--report-only | --cross-check-only]
 
 For start/target pairs drawn as the environments draw them (penny_env/presets: the paper's ellipse and
 the stadium, reach and park tasks), each problem is solved twice:
@@ -12,14 +14,18 @@ the stadium, reach and park tasks), each problem is solved twice:
   physics/sensitivity.flow_jacobians), checked afterwards by simulating the solution on the table (no
   impact, and at least half the margin at 40 samples per row).
 
-Method: single shooting over the K control rows (held for the scene's control_dt, as the environments
-act), scaled torques v = u / torque_limit in [-1, 1], SLSQP (scipy.optimize) with the exact gradients.
+Method: shooting over the K control rows (held for the scene's control_dt, as the environments act),
+scaled torques v = u / torque_limit in [-1, 1], SLSQP (scipy.optimize) with the exact gradients. The
+study uses single shooting (``Problem.segment_rows`` None); multiple shooting (segments of
+``SEGMENT_ROWS`` rows with node states and continuity constraints, training/shooting.py) solves the
+minimum-effort problems of the first ``--cross-check-pairs`` pairs again as a cross-check: at these
+horizons (at most ``MAX_ROWS`` rows) it finds the same optima and costs several times more.
 The terminal set is the task's: contact point within ``tolerance`` of the target (reach), and rolling
 speed |R theta_dot| below ``speed_tolerance`` too (park).
 
 * **minimum effort**: minimise mean(v^2) over a fixed horizon (``EFFORT_ROWS`` rows);
-* **minimum time**: the fewest rows K <= ``MAX_ROWS`` for which the terminal set is reachable (bisection
-  on K, assuming that reachability at K rows implies it at more rows; each K is a feasibility solve).
+* **minimum time**: the fewest rows K <= ``MAX_ROWS`` for which the terminal set is reachable (a downward
+  scan over K, assuming that reachability at K rows implies it at more rows; each K is a feasibility solve).
 
 SLSQP is a local solver. The impacts-forbidden problem is solved first from zero torques; its optimum
 never touches the wall, so it is feasible with impacts allowed and seeds that solve, together with zero
@@ -29,11 +35,16 @@ impacts and is better; no gap does not prove that no better one with impacts exi
 
 Every solve is verified by simulating its controls again on the table; a solve that fails to converge
 or whose verification fails is reported as such ("failed"), never dropped.
+
+The solved pairs are saved to RUNS/rows.pkl; ``--report-only`` rewrites the report from them, and the
+report's last section runs the RL study's trained agents (``--study-runs``) on the same pairs
+(training/optimal_vs_rl.py).
 """
 from __future__ import annotations
 
 import argparse
 import math
+import pickle
 import sys
 import tempfile
 import time
@@ -43,13 +54,10 @@ from pathlib import Path
 import numpy as np
 
 import penny_env as pe
-from penny_env.physics.kernels import end_point, SCALAR
-from penny_env.physics.scalar import flow1
-from penny_env.physics.sensitivity import flow_jacobians
+from training.shooting import SEGMENT_ROWS, SUBSAMPLES, MultipleShooting, segment_bounds, wall_values
 
 EFFORT_ROWS = 30      # minimum effort: horizon in control rows (1.5 s at 0.05 s)
 MAX_ROWS = 40         # minimum time: the longest horizon tried
-SUBSAMPLES = 4        # impacts forbidden: wall-distance samples inside each row (plus its end)
 DEFAULT_MARGIN = 0.005
 SCENES = ("ellipse", "stadium")
 TASKS = ("reach", "park")
@@ -68,6 +76,7 @@ class Problem:
     impacts: bool
     margin: float = DEFAULT_MARGIN
     actuation: str = "both"
+    segment_rows: int | None = None   # the method: None single shooting, L multiple shooting (L rows a segment)
     table: object = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -79,6 +88,8 @@ class Problem:
             raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
         if self.actuation not in ACTUATIONS:
             raise ValueError(f"actuation must be one of {ACTUATIONS}, got {self.actuation!r}")
+        if self.segment_rows is not None:
+            segment_bounds(1, self.segment_rows)  # a TypeError / ValueError naming segment_rows
         sc, tk = resolve(self.scene, self.task)
         self.table, self.law, self.params = sc.make_table(), sc.make_law(), sc.make_params()
         self.dt = float(sc.control_dt)
@@ -116,61 +127,6 @@ def scene_table(scene):
     return resolve(scene, "reach")[0].make_table()
 
 
-def wall_values(prob, s):
-    """h(end) for the front and back end of state s."""
-    R = prob.params.R
-    out = []
-    for sigma in (1.0, -1.0):
-        px, py, _, _ = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
-        out.append(float(prob.table.h(px, py)))
-    return out
-
-
-def wall_gradient(prob, s, sigma):
-    """(h(end), d h(end) / d state) for end sigma."""
-    R = prob.params.R
-    c, sn = math.cos(s[3]), math.sin(s[3])
-    px, py = s[0] + sigma * R * c, s[1] + sigma * R * sn
-    hx, hy = (float(v) for v in prob.table.grad(px, py))
-    g = np.zeros(6)
-    g[0], g[1], g[3] = hx, hy, sigma * R * (hy * c - hx * sn)
-    return float(prob.table.h(px, py)), g
-
-
-# -- the shooting functions: final state, path samples and their derivatives w.r.t. v = u / limits ----
-def rollout(prob, v):
-    """(final state, d final / d v (6 x 2K), path samples (h (n,), dh/dv (n, 2K)) or None, valid, reason)."""
-    K = v.shape[0]
-    u = v * prob.limits[None, :]
-    scale = np.tile(prob.limits, K)  # du / dv
-    if prob.impacts:
-        tr = pe.simulate(prob.start, params=prob.params, table=prob.table, law=prob.law, controls=u,
-                         control_dt=prob.dt, sensitivities=True)
-        return tr.final_state, tr.control_jacobian * scale[None, :], None, tr.jacobian_valid, tr.jacobian_reason
-    # impacts forbidden: the free flow, chained row by row, with wall samples inside each row
-    R, J, Itot = prob.params.R, prob.params.J, prob.params.rolling_inertia
-    s = tuple(prob.start)
-    C = np.zeros((6, 2 * K))
-    hs, dh = [], []
-    taus = prob.dt * np.arange(1, SUBSAMPLES + 2) / (SUBSAMPLES + 1)
-    dacc = np.array([1.0 / J, 1.0 / Itot])
-    for k in range(K):
-        a1, a2 = u[k, 0] / J, u[k, 1] / Itot
-        Phi, B = flow_jacobians(np.array(s), a1, a2, taus, R)
-        Cs = Phi @ C  # (n, 6, 2K)
-        Cs[:, :, 2 * k:2 * k + 2] += B * dacc[None, None, :]
-        G = np.empty((len(taus), 2, 6))
-        for j, tau in enumerate(taus):
-            st = flow1(s, a1, a2, tau, R)
-            for e, sigma in enumerate((1.0, -1.0)):
-                h, G[j, e] = wall_gradient(prob, st, sigma)
-                hs.append(h)
-        dh.append(np.einsum("jei,jik->jek", G, Cs).reshape(-1, 2 * K))
-        s, C = st, Cs[-1]
-    samples = (np.array(hs), np.concatenate(dh) * scale[None, :])
-    return np.array(s), C * scale[None, :], samples, True, ""
-
-
 @dataclass
 class Solution:
     status: str               # "optimal" | "failed: <why>"
@@ -189,7 +145,9 @@ class Solution:
 
 
 def solve_rows(prob, K, x0=None, maxiter=200):
-    """Minimum effort over K rows into the terminal set (SLSQP, exact gradients); verified by simulation."""
+    """Minimum effort over K rows into the terminal set, SLSQP with exact gradients: single shooting
+    (prob.segment_rows None) or multiple shooting with segments of prob.segment_rows rows
+    (training/shooting.py); verified by simulating the torques again from the start, in one piece."""
     from scipy.optimize import minimize
 
     if isinstance(K, bool) or not isinstance(K, (int, np.integer)):
@@ -199,54 +157,47 @@ def solve_rows(prob, K, x0=None, maxiter=200):
     t0 = time.perf_counter()
     R = prob.params.R
     active = prob.limits > 0
-    n = 2 * K
-    bounds = [(-1.0, 1.0) if active[i % 2] else (0.0, 0.0) for i in range(n)]
-    cache = {}
+    ms = MultipleShooting(prob, K, prob.segment_rows)
+    nv = ms.nv
+    bounds = [(-1.0, 1.0) if active[i % 2] else (0.0, 0.0) for i in range(nv)] + [(None, None)] * (ms.n - nv)
 
-    def run(x):
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = rollout(prob, x.reshape(K, 2))
-        return cache[key]
-
-    def terminal(x):
-        s, D, _, _, _ = run(x)
+    def terminal(z):
+        s = ms.evaluate(z)[0]
         d = s[:2] - prob.target
         out = [1.0 - (d @ d) / prob.tolerance ** 2]
         if prob.task == "park":
             out.append(1.0 - (R * s[4] / prob.speed_tolerance) ** 2)
         return np.nan_to_num(np.array(out), nan=-1e6)
 
-    def terminal_jac(x):
-        s, D, _, _, _ = run(x)
+    def terminal_jac(z):
+        s, D = ms.evaluate(z)[:2]
         d = s[:2] - prob.target
         rows = [-2.0 * (d @ D[:2]) / prob.tolerance ** 2]
         if prob.task == "park":
             rows.append(-2.0 * (R / prob.speed_tolerance) ** 2 * s[4] * D[4])
         return np.nan_to_num(np.array(rows))
 
-    def path(x):
-        return -(run(x)[2][0] + prob.margin) / prob.margin
-
-    def path_jac(x):
-        return -run(x)[2][1] / prob.margin
-
     cons = [{"type": "ineq", "fun": terminal, "jac": terminal_jac}]
+    if ms.S > 1:  # continuity of the segments
+        cons.append({"type": "eq", "fun": lambda z: np.nan_to_num(ms.evaluate(z)[2], nan=1e6),
+                     "jac": lambda z: np.nan_to_num(ms.evaluate(z)[3])})
     if not prob.impacts and prob.margin > 0:
-        cons.append({"type": "ineq", "fun": path, "jac": path_jac})
-    x = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float).ravel().copy()
-    res = minimize(lambda z: float(z @ z) / n, x, jac=lambda z: 2.0 * z / n, method="SLSQP", bounds=bounds,
-                   constraints=cons, options={"maxiter": maxiter, "ftol": 1e-10})
-    u = res.x.reshape(K, 2) * prob.limits[None, :]
+        cons.append({"type": "ineq", "fun": lambda z: -(ms.evaluate(z)[4] + prob.margin) / prob.margin,
+                     "jac": lambda z: -ms.evaluate(z)[5] / prob.margin})
+    v0 = np.zeros((K, 2)) if x0 is None else np.asarray(x0, dtype=float).reshape(K, 2)
+    res = minimize(lambda z: float(z[:nv] @ z[:nv]) / nv, ms.initial(v0),
+                   jac=lambda z: np.concatenate([2.0 * z[:nv] / nv, np.zeros(ms.n - nv)]), method="SLSQP",
+                   bounds=bounds, constraints=cons, options={"maxiter": maxiter, "ftol": 1e-10})
+    v = np.clip(res.x[:nv], -1.0, 1.0)
+    u = v.reshape(K, 2) * prob.limits[None, :]
     tr = pe.simulate(prob.start, params=prob.params, table=prob.table, law=prob.law, controls=u, control_dt=prob.dt)
     dist = float(np.hypot(*(tr.final_state[:2] - prob.target)))
     status = "optimal"
-    valid = run(res.x)[3]
+    valid, reason = ms.evaluate(res.x)[6:8]
     if not res.success:
         status = f"failed: {res.message}"
     elif not valid:
-        status = f"failed: no derivative ({run(res.x)[4]})"
+        status = f"failed: no derivative ({reason})"
     elif dist > prob.tolerance * (1 + 1e-6):
         status = f"failed: verification missed the target by {dist:.4g} m"
     elif prob.task == "park" and abs(R * tr.final_state[4]) > prob.speed_tolerance * (1 + 1e-6):
@@ -255,7 +206,7 @@ def solve_rows(prob, K, x0=None, maxiter=200):
         status = f"failed: verification hit the wall {tr.n_impacts} times"
     elif not prob.impacts and prob.margin > 0 and dense_clearance(prob, tr) < 0.5 * prob.margin:
         status = f"failed: verification came within {dense_clearance(prob, tr):.3g} m of the wall between samples"
-    return Solution(status, K, float(res.x @ res.x) / n, u, tr.n_impacts, dist, prob.dt, time.perf_counter() - t0, tr)
+    return Solution(status, K, float(v @ v) / nv, u, tr.n_impacts, dist, prob.dt, time.perf_counter() - t0, tr)
 
 
 def solve_best(prob, K, starts=(), random_starts=0, seed=0, maxiter=200):
@@ -291,28 +242,32 @@ def _safe(limits):
 
 
 def minimum_time(prob, max_rows=MAX_ROWS, maxiter=200, hint=None, random_starts=0):
-    """The fewest rows that reach the terminal set (bisection on K, assuming that what K rows reach, more
-    rows reach too); status failed if none up to max_rows. hint: a solution (e.g. the impacts-forbidden
-    optimum) whose row count is tried first as the upper end."""
+    """The fewest rows that reach the terminal set; status failed if none up to max_rows.
+
+    A downward scan: from a feasible horizon (hint's rows, e.g. the impacts-forbidden optimum, which is
+    feasible with impacts allowed; else max_rows, from zero torques and random_starts random ones), try one
+    row fewer, warm-started from the last solution cut by its last row (then from zero torques), until a
+    horizon fails. It assumes, as a bisection would, that what K rows reach, K + 1 rows reach too; unlike a
+    bisection it meets exactly one infeasible horizon, and infeasible solves are the costly ones (SLSQP
+    runs to its iteration limit there)."""
     t0 = time.perf_counter()
-    hi = None
+    best = None
     if hint is not None and hint.ok and hint.rows <= max_rows:
-        hi = solve_best(prob, hint.rows, [hint.controls / _safe(prob.limits)], 0, maxiter=maxiter)
-    if hi is None or not hi.ok:
-        hi = solve_best(prob, max_rows, (), random_starts, maxiter=maxiter)
-    if not hi.ok:
-        hi.status = f"failed: not reached within {max_rows} rows ({hi.status})"
-        hi.seconds = time.perf_counter() - t0
-        return hi
-    lo_rows, best = 0, hi
-    while best.rows - lo_rows > 1:
-        mid = (lo_rows + best.rows) // 2
-        # warm start: the shorter horizon begins as the best solution does
-        sol = solve_best(prob, mid, [best.controls[:mid] / _safe(prob.limits)], 0, maxiter=maxiter)
-        if sol.ok:
-            best = sol
-        else:
-            lo_rows = mid
+        best = solve_best(prob, hint.rows, [hint.controls / _safe(prob.limits)], 0, maxiter=maxiter)
+    if best is None or not best.ok:
+        best = solve_best(prob, max_rows, (), random_starts, maxiter=maxiter)
+    if not best.ok:
+        best.status = f"failed: not reached within {max_rows} rows ({best.status})"
+        best.seconds = time.perf_counter() - t0
+        return best
+    while best.rows > 1:
+        K = best.rows - 1
+        sol = solve_rows(prob, K, x0=best.controls[:K] / _safe(prob.limits), maxiter=maxiter)
+        if not sol.ok:
+            sol = solve_rows(prob, K, x0=None, maxiter=maxiter)
+        if not sol.ok:
+            break
+        best = sol
     best.seconds = time.perf_counter() - t0
     return best
 
@@ -346,22 +301,26 @@ def draw_pairs(scene, task, n, seed, margin=DEFAULT_MARGIN):
 
 def solve_pair(job):
     """One pair of one problem, solved with impacts forbidden and allowed: the study's unit of work."""
-    sc, tk, ob, i, s, target, actuation, horizon, maxiter, random_starts = job
+    sc, tk, ob, i, s, target, actuation, horizon, maxiter, random_starts, segment_rows = job
     # impacts forbidden first: its optimum is feasible with impacts allowed (it never touches the wall),
     # so it seeds the allowed solve, which then can only do as well or better
     solve = minimum_effort if ob == "effort" else minimum_time
-    without = solve(Problem(sc, tk, s, target, impacts=False, actuation=actuation), horizon, maxiter)
-    with_ = solve(Problem(sc, tk, s, target, impacts=True, actuation=actuation), horizon, maxiter,
+    kw = dict(actuation=actuation, segment_rows=segment_rows)
+    without = solve(Problem(sc, tk, s, target, impacts=False, **kw), horizon, maxiter)
+    with_ = solve(Problem(sc, tk, s, target, impacts=True, **kw), horizon, maxiter,
                   hint=without, random_starts=random_starts)
     return {"scene": sc, "task": tk, "objective": ob, "pair": i, "actuation": actuation,
+            "method": "single" if segment_rows is None else f"multiple ({segment_rows} rows a segment)",
+            "start": np.asarray(s, dtype=float), "target": np.asarray(target, dtype=float),
             "with": with_, "without": without}
 
 
 def study(n_pairs, seed=0, scenes=SCENES, tasks=TASKS, objectives=OBJECTIVES, actuation="both", progress=True,
-          effort_rows=EFFORT_ROWS, max_rows=MAX_ROWS, maxiter=200, random_starts=2, workers=1):
-    """Every (scene, task, objective) on n_pairs pairs; workers > 1 solves pairs in that many processes."""
+          effort_rows=EFFORT_ROWS, max_rows=MAX_ROWS, maxiter=200, random_starts=2, workers=1, segment_rows=None):
+    """Every (scene, task, objective) on n_pairs pairs; workers > 1 solves pairs in that many processes;
+    segment_rows: None single shooting, L multiple shooting with L rows a segment."""
     jobs = [(sc, tk, ob, i, s, target, actuation, effort_rows if ob == "effort" else max_rows, maxiter,
-             random_starts)
+             random_starts, segment_rows)
             for sc in scenes for tk in tasks for ob in objectives
             for i, (s, target) in enumerate(draw_pairs(sc, tk, n_pairs, seed))]
     if workers > 1:
@@ -449,14 +408,53 @@ def plot_examples(rows, path, n=4):
     return True
 
 
-def write_report(rows, out_path: Path, command: str, seconds: float):
+def is_single(row) -> bool:
+    return row.get("method", "single") == "single"
+
+
+def cross_check(rows, rel=1e-6):
+    """Multiple against single shooting on the same (scene, task, objective, actuation, pair, impacts): pairs
+    compared, both converged, agreeing values (within rel), and the largest relative difference."""
+    single = {(r["scene"], r["task"], r["objective"], r.get("actuation", "both"), r["pair"]): r
+              for r in rows if is_single(r)}
+    out = {"compared": 0, "both": 0, "agree": 0, "max_rel": 0.0, "multiple_better": 0, "single_better": 0,
+           "seconds_single": 0.0, "seconds_multiple": 0.0}
+    for r in rows:
+        if is_single(r):
+            continue
+        twin = single.get((r["scene"], r["task"], r["objective"], r.get("actuation", "both"), r["pair"]))
+        if twin is None:
+            continue
+        for k in ("with", "without"):
+            out["compared"] += 1
+            out["seconds_single"] += twin[k].seconds
+            out["seconds_multiple"] += r[k].seconds
+            if r[k].ok and twin[k].ok:
+                a, b = value(r[k], r["objective"]), value(twin[k], r["objective"])
+                d = abs(a - b) / max(abs(b), 1e-300)
+                out["both"] += 1
+                out["agree"] += d <= rel
+                out["max_rel"] = max(out["max_rel"], d)
+                out["multiple_better"] += a < b and d > rel
+                out["single_better"] += b < a and d > rel
+    return out
+
+
+def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None):
+    """The report from the solved rows (single shooting; multiple-shooting rows go to the cross-check)."""
+    checked = [r for r in rows if not is_single(r)]
+    rows = [r for r in rows if is_single(r)]
     summary = summarise(rows)
     png = out_path.with_name("optimal_control.png")
     has_png = plot_examples(rows, png)
-    lines = ["# Does the optimal penny need impacts?", "",
-             f"Generated by `{command}` ({time.strftime('%Y-%m-%d')}, {seconds:.0f} s). "
+    from penny_env.analysis.common import machine_lines
+
+    lines = ["# Does the optimal penny need impacts?", "", *machine_lines(),
+             "- commands: " + ", then ".join(f"`{c}`" for c in commands) +
+             f" (from the repository root); the solves took {seconds:.0f} s in all", "",
              "Method: see the docstring of `training/optimal_control.py` (single shooting over the control rows, "
-             "SLSQP, exact derivatives through impacts from `simulate(..., sensitivities=True)`).", "",
+             "SLSQP, exact derivatives through impacts from `simulate(..., sensitivities=True)`; multiple "
+             "shooting, training/shooting.py, as a cross-check below).", "",
              "| scene | task | objective | actuation | pairs | converged with / without impacts | both | "
              "with impacts strictly better | mean gap | solved only with impacts | optimum uses impacts |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -466,14 +464,28 @@ def write_report(rows, out_path: Path, command: str, seconds: float):
         lines.append(f"| {s['scene']} | {s['task']} | {s['objective']} | {s['actuation']} | {s['pairs']} "
                      f"| {s['ok_with']} / {s['ok_without']} "
                      f"| {s['both']} | {share} | {gap} | {s['only_with']} | {s['impacts_used']} |")
-    lines += ["", "Not done here: the comparison with the RL agents of the study (issue 11) on the same pairs.",
-              "", "Effort: mean of (u / torque limit)^2 over the rows; time: rows x control_dt. Failed solves:", ""]
+    lines += ["", "Effort: mean of (u / torque limit)^2 over the rows; time: rows x control_dt. Failed solves:", ""]
     failed = [(r, k) for r in rows for k in ("with", "without") if not r[k].ok]
     lines += [f"* {r['scene']} {r['task']} {r['objective']} ({r.get('actuation', 'both')}) pair {r['pair']}, impacts "
               f"{'allowed' if k == 'with' else 'forbidden'}: {r[k].status}" for r, k in failed] or ["* none"]
     if has_png:
         lines += ["", f"![optimal trajectories]({png.name})", "",
                   "Optimal trajectories (impacts marked x): impacts allowed (solid), forbidden (dashed)."]
+    if checked:
+        c = cross_check(rows + checked)
+        lines += ["", "## Multiple shooting against single shooting", "",
+                  f"The minimum-effort problems of the first pairs, solved again by multiple shooting "
+                  f"({checked[0]['method']}; node states and continuity defects, training/shooting.py), from the "
+                  f"same starting torques: {c['compared']} solves compared, {c['both']} converged with both "
+                  f"methods, {c['agree']} of those with the same optimal effort to 1e-6 relative (largest relative "
+                  f"difference {c['max_rel']:.1e}); multiple shooting lower in {c['multiple_better']}, single "
+                  f"shooting lower in {c['single_better']}. Solver time: {c['seconds_single']:.0f} s single, "
+                  f"{c['seconds_multiple']:.0f} s multiple, which is why the study above uses single shooting at "
+                  f"these horizons (at most {MAX_ROWS} rows)."]
+    if study_runs is not None:
+        from training.optimal_vs_rl import compare, markdown
+
+        lines += [""] + markdown(*compare(rows, study_runs), study_runs)
     out_path.write_text("\n".join(lines) + "\n")
     return summary
 
@@ -484,32 +496,73 @@ def main(argv=None):
     ap.add_argument("--pairs", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="processes solving pairs in parallel")
-    ap.add_argument("--single-input-pairs", type=int, default=None,
-                    help="pairs for the steer-only and drive-only minimum-time problems (default: --pairs)")
+    ap.add_argument("--single-input-pairs", type=int, default=10,
+                    help="pairs for the steer-only and drive-only minimum-time problems (default 10)")
+    ap.add_argument("--cross-check-pairs", type=int, default=10,
+                    help="pairs whose minimum-effort problems are solved again by multiple shooting (default 10)")
     ap.add_argument("--out", type=Path, default=None, help="report path (default docs/optimal_control.md; "
                                                               "--quick: a temporary folder)")
+    ap.add_argument("--runs", type=Path, default=None,
+                    help="where the solved pairs are saved (rows.pkl; default runs/optimal_control, --quick: beside "
+                         "the report)")
+    ap.add_argument("--study-runs", type=Path, default=Path("runs/study"),
+                    help="the RL study's job folder: its trained agents are run on the same pairs (default runs/study)")
+    stage = ap.add_mutually_exclusive_group()
+    stage.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
+    stage.add_argument("--cross-check-only", action="store_true",
+                       help="redo only the multiple-shooting cross-check on the saved rows.pkl, then the report")
     args = ap.parse_args(argv)
-    if args.pairs < 1:
-        raise SystemExit("--pairs must be >= 1")
-    if args.workers < 1:
-        raise SystemExit("--workers must be >= 1")
-    t0 = time.perf_counter()
+    for name in ("pairs", "workers"):
+        if getattr(args, name) < 1:
+            raise SystemExit(f"--{name} must be >= 1, got {getattr(args, name)}")
+    for name in ("single_input_pairs", "cross_check_pairs"):
+        if getattr(args, name) < 0:
+            raise SystemExit(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
+    docs = Path(__file__).resolve().parents[1] / "docs"
     if args.quick:
         out = args.out or Path(tempfile.mkdtemp(prefix="optimal_control_")) / "optimal_control.md"
-        if out.resolve().parent == (Path(__file__).resolve().parents[1] / "docs"):
+        if out.resolve().parent == docs:
             raise SystemExit("--quick never writes into docs/")
-        rows = study(2, args.seed, scenes=("ellipse",), tasks=("reach",), objectives=("effort",), effort_rows=EFFORT_ROWS, maxiter=100,
-                     random_starts=1, workers=args.workers)
+        scenes, tasks, objectives, n_pairs, checked = ("ellipse",), ("reach",), ("effort",), 2, 1
+        cmd = "python -m training.optimal_control --quick"
     else:
-        out = args.out or Path(__file__).resolve().parents[1] / "docs" / "optimal_control.md"
-        rows = study(args.pairs, args.seed, workers=args.workers)
-        single = args.pairs if args.single_input_pairs is None else args.single_input_pairs
-        for act in ("steer", "drive"):  # which single-input problems have solutions only with impacts?
-            rows += study(single, args.seed, tasks=("reach",), objectives=("time",), actuation=act,
-                          workers=args.workers)
+        out = args.out or docs / "optimal_control.md"
+        scenes, tasks, objectives, n_pairs, checked = SCENES, TASKS, OBJECTIVES, args.pairs, args.cross_check_pairs
+        cmd = (f"python -m training.optimal_control --pairs {args.pairs} --single-input-pairs "
+               f"{args.single_input_pairs} --cross-check-pairs {args.cross_check_pairs} --seed {args.seed}")
+    runs = args.runs or (out.parent if args.quick else Path("runs/optimal_control"))
+    saved = runs / "rows.pkl"
+    quick = dict(maxiter=100, random_starts=1) if args.quick else {}
+    t0 = time.perf_counter()
+    if args.report_only or args.cross_check_only:
+        if not saved.is_file():
+            raise SystemExit(f"no saved solves at {saved} (run without --report-only / --cross-check-only first)")
+        with open(saved, "rb") as f:
+            rows, seconds, *rest = pickle.load(f)
+        commands = rest[0] if rest else [cmd.split(" --cross-check-pairs")[0]]
+    else:
+        rows = study(n_pairs, args.seed, scenes=scenes, tasks=tasks, objectives=objectives, workers=args.workers,
+                     **quick)
+        if not args.quick:
+            for act in ("steer", "drive"):  # which single-input problems have solutions only with impacts?
+                if args.single_input_pairs:
+                    rows += study(args.single_input_pairs, args.seed, tasks=("reach",), objectives=("time",),
+                                  actuation=act, workers=args.workers)
+        commands, seconds = [cmd], 0.0
+    if not args.report_only:
+        if args.cross_check_only:
+            rows = [r for r in rows if is_single(r)]
+            commands = commands + [f"python -m training.optimal_control --cross-check-only --cross-check-pairs "
+                                   f"{args.cross_check_pairs}"]
+        if checked:  # the same pairs (same seed), by multiple shooting
+            rows += study(checked, args.seed, scenes=scenes, tasks=tasks, objectives=("effort",),
+                          workers=args.workers, segment_rows=SEGMENT_ROWS, **quick)
+        seconds += time.perf_counter() - t0
+        runs.mkdir(parents=True, exist_ok=True)
+        with open(saved, "wb") as f:
+            pickle.dump((rows, seconds, commands), f)
     out.parent.mkdir(parents=True, exist_ok=True)
-    cmd = "python -m training.optimal_control" + (" --quick" if args.quick else f" --pairs {args.pairs}")
-    write_report(rows, out, cmd, time.perf_counter() - t0)
+    write_report(rows, out, commands, seconds, study_runs=args.study_runs)
     print(f"wrote {out}")
     return out
 

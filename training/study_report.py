@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 from collections import defaultdict
 from pathlib import Path
 
@@ -262,7 +263,9 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
     cpu_seconds = sum(r.get("cpu_seconds", 0.0) for res in groups.values() for r in res)
     lines = header("Does controllability of the penny need impacts? (RL study)", "training.study", list(argv))
     span = jobs_span(jobs, runs, groups)
-    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU); "
+    cores = os.cpu_count() or 1
+    lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU, "
+              f"{cpu_seconds / cores / 60:.0f} min on this machine's {cores} cores if nothing else runs); "
               f"the jobs ran from {span[0]} to {span[1]} UTC ({span[2] / 60:.0f} min, from their result files); wall "
               f"time of this invocation {seconds:.0f} s (finished jobs are not rerun). Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
               f"budgets {cfg['timesteps']} env steps. Probe tasks: [study_probes.md](study_probes.md).", ""]
