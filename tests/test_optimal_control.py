@@ -152,3 +152,40 @@ def test_agents_run_from_the_optimal_control_pairs(tmp_path):
     assert ppo["episodes"] == 2 and ppo["seeds"] == 1 and 0.0 <= ppo["success"] <= 1.0
     text = "\n".join(ovr.markdown(results, notes, tmp_path))
     assert "| ellipse | ppo | 1 | 2 |" in text and "| ellipse | feedback | 1 | 2 |" in text
+
+
+def test_summary_counts_only_wall_hits_as_impacts_paying():
+    """An allowed optimum that wins without touching the wall (inside the forbidden problem's margin) is better,
+    but not an optimum that needs impacts; the answer lines are computed from those counts."""
+    def sol(effort, impacts, ok=True):
+        return oc.Solution("optimal" if ok else "failed: x", 30, effort, np.zeros((30, 2)), impacts, 0.0, 0.05, 0.0)
+    rows = [{"scene": "ellipse", "task": "reach", "objective": "effort", "pair": i, "with": w, "without": wo}
+            for i, (w, wo) in enumerate([(sol(0.5, 1), sol(1.0, 0)),      # better, hits the wall
+                                          (sol(0.5, 0), sol(1.0, 0)),      # better, no impact (margin)
+                                          (sol(1.0, 2), sol(1.0, 0)),      # equal
+                                          (sol(0.7, 1), sol(0.0, 0, ok=False))])]  # solved only when allowed
+    s = oc.summarise(rows)[0]
+    assert (s["both"], s["better"], s["better_impacts"], s["only_with"], s["only_with_impacts"]) == (3, 2, 1, 1, 1)
+    assert s["mean_gap"] == pytest.approx(0.5) and s["impacts_used"] == 3
+    assert oc.answer([s])[0] == ("- Both controls, minimum effort: the optimum with impacts allowed hits the wall and "
+                                 "is strictly better in 1 of 3 pairs solved both ways (33%), and 1 pair(s) were "
+                                 "solved only with impacts allowed and with an impact.")
+
+
+def test_agent_summary_pairs_episodes_with_optima():
+    from training import optimal_vs_rl as ovr
+
+    def sol(rows, ok=True):
+        return oc.Solution("optimal" if ok else "failed: x", rows, 0.0, np.zeros((rows, 2)), 0, 0.0, 0.05, 0.0)
+    sel = [{"with": sol(10), "without": sol(12)}, {"with": sol(20), "without": sol(1, ok=False)},
+           {"with": sol(5), "without": sol(5)}]
+    eps = [{"success": [True, True, False], "time": [2.0, 4.0, 20.0], "impacts": [1, 0, 0]},
+           {"success": [True, False, True], "time": [0.4, 20.0, 0.25], "impacts": [0, 0, 0]}]
+    r = ovr.summarise_agent("ellipse", "cell", "ppo", sel, eps)
+    assert r["episodes"] == 6 and r["success"] == pytest.approx(4 / 6)
+    assert r["rl_time"] == pytest.approx((2.0 + 4.0 + 0.4 + 0.25) / 4)
+    # optimal times over the successes on pairs both solves converged on: pairs 0, 0, 2
+    assert r["oc_with"] == pytest.approx((0.5 + 0.5 + 0.25) / 3) and r["oc_without"] == pytest.approx((0.6 + 0.6 + 0.25) / 3)
+    # ratios against the allowed optimum: 4, 4, 0.8, 1 -> median 2.5; one episode faster than the optimum
+    assert r["ratio_median"] == pytest.approx(2.5) and (r["rl_faster"], r["compared"]) == (1, 4)
+    assert r["impact_share"] == pytest.approx(0.25)
