@@ -243,3 +243,29 @@ def test_paired_times_pair_the_same_draws():
     assert len(rows) == 1 and rows[0]["agent"] == "ppo" and rows[0]["pairs"] == 2  # episodes 0 and 3
     assert rows[0]["mean_diff_s"] == pytest.approx(((1 - 3) + (5 - 4)) / 2)
     assert rows[0]["table_faster"] == 0.5 and rows[0]["ci_low"] <= rows[0]["mean_diff_s"] <= rows[0]["ci_high"]
+
+
+def test_a_result_of_another_config_is_stale(tmp_path):
+    """A rerun skips a job only if its result.json was made by the same job; a changed budget runs it again."""
+    job = {"cell": "PennyProbeDrive-Plane-v0", "agent": "ppo", "seed": 0, "eval_episodes": 4, "timesteps": 1024,
+           "num_envs": 8, "hyperparameters": {"n_steps": 64, "policy_kwargs": {"net_arch": [32, 32]}},
+           "curve_points": 2, "curve_episodes": 8}
+    assert not study.finished(tmp_path, job)
+    study.job_dir(tmp_path, job).mkdir(parents=True)
+    study._finish(tmp_path, {"job": job, "episodes": {}, "curve": [], "seconds": 0.0})
+    assert study.finished(tmp_path, job)  # the JSON round trip keeps it equal
+    assert not study.finished(tmp_path, dict(job, timesteps=2048))
+    assert not study.finished(tmp_path, dict(job, hyperparameters={"n_steps": 128}))
+    (study.job_dir(tmp_path, job) / "result.json").write_text("{not json")
+    assert not study.finished(tmp_path, job)
+
+
+def test_training_leaves_the_job_config_as_it_was(tmp_path):
+    """SB3 adds keys to policy_kwargs (SAC: use_sde); the job's own dict, which result.json records and the rerun
+    check compares, must not change, or every finished SAC job would look stale."""
+    pytest.importorskip("stable_baselines3")
+    from training.runner import train_agent
+    hyper = {"learning_starts": 16, "buffer_size": 1000, "batch_size": 16, "policy_kwargs": {"net_arch": [8]}}
+    before = json.loads(json.dumps(hyper))
+    train_agent(tmp_path / "run", "PennyProbeDrive-Plane-v0", "sac", 0, 64, 2, hyper, 1, 2)
+    assert hyper == before

@@ -426,8 +426,13 @@ def plot_examples(rows, path, n=4):
             if sol.traj.n_impacts:
                 q = sol.traj.impact_states
                 ax.plot(q[:, 0], q[:, 1], "rx", ms=7)
+        if "target" in r:
+            ax.plot(*r["target"], "o", mfc="none", mec="k", ms=8, label="target")
         ax.set_aspect("equal")
-        ax.set_title(f"{r['scene']} {r['task']} min {r['objective']} #{r['pair']}", fontsize=9)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_title(f"{r['scene']} {r['task']} min {r['objective']} ({r.get('actuation', 'both')}) #{r['pair']}",
+                     fontsize=9)
         ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -507,7 +512,8 @@ def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None
               f"{'allowed' if k == 'with' else 'forbidden'}: {r[k].status}" for r, k in failed] or ["* none"]
     if has_png:
         lines += ["", f"![optimal trajectories]({png.name})", "",
-                  "Optimal trajectories (impacts marked x): impacts allowed (solid), forbidden (dashed)."]
+                  "Optimal trajectories of the contact point (impacts marked x, the target circled), those that hit "
+                  "the wall first: impacts allowed (solid), forbidden (dashed; its status in the legend)."]
     if checked:
         c = cross_check(rows + checked)
         lines += ["", "## Multiple shooting against single shooting", "",

@@ -13,6 +13,7 @@ thread a rerun gives the same model.
 """
 from __future__ import annotations
 
+import copy
 import csv
 import inspect
 import json
@@ -107,7 +108,7 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.logger import configure
 
-    hyper = dict(hyperparameters or {})
+    hyper = copy.deepcopy(dict(hyperparameters or {}))  # SB3 writes into policy_kwargs (use_sde): not into the caller's job
     check_hyperparameters(algo, hyper)
     Algo = algo_class(algo)
     run_dir = Path(run_dir)

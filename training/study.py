@@ -6,8 +6,8 @@
 Jobs are keyed by (cell, agent, seed): a cell is a probe env id (docs/study_probes.md), an agent
 PPO or SAC (SB3, trained then evaluated) or a reference (zero, random, feedback). Each job writes
 its files under RUNS/<cell>/<agent>/seed<k>/ and, last, result.json; a rerun skips the jobs that
-have one, so a crash or a stop loses nothing. The jobs run in a process pool on all local cores
-(--workers) with a progress bar, or with --ray as Ray tasks on the cluster named by RAY_ADDRESS
+have one made with the same job config (a changed budget or hyperparameter runs the job again), so a
+crash or a stop loses nothing. The jobs run in a process pool on all local cores (--workers) with a progress bar, or with --ray as Ray tasks on the cluster named by RAY_ADDRESS
 (a local Ray instance when it is unset; a cluster needs penny_env installed and --runs on a
 shared file system). The report (training/study_report.py) goes to --out, with its CSV and PNGs
 beside it. --quick runs configs/study/quick.yaml (a few minutes on 2 cores, learns nothing) and
@@ -119,6 +119,18 @@ def make_jobs(cfg) -> list[dict]:
 
 def job_dir(runs, job) -> Path:
     return Path(runs) / job["cell"] / job["agent"] / f"seed{job['seed']}"
+
+
+def finished(runs, job) -> bool:
+    """The job has a result, made with this very job (cell, agent, seed, budgets, hyperparameters, episodes):
+    a result of a job whose config has changed since is stale and runs again."""
+    path = job_dir(runs, job) / "result.json"
+    if not path.is_file():
+        return False
+    try:
+        return json.loads(path.read_text())["job"] == job
+    except (ValueError, KeyError, TypeError):  # unreadable: run it again
+        return False
 
 
 def run_job(job: dict, runs: str) -> dict:
@@ -237,8 +249,11 @@ def main(argv=None):
     except ValueError as exc:
         ap.error(str(exc))
     jobs = make_jobs(cfg)
-    todo = [j for j in jobs if not (job_dir(runs, j) / "result.json").is_file()]
-    print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already finished in {runs}", flush=True)
+    todo = [j for j in jobs if not finished(runs, j)]
+    stale = sum((job_dir(runs, j) / "result.json").is_file() for j in todo)
+    print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already finished in {runs}"
+          + (f"; {stale} with a result of another config (budgets, hyperparameters...) run again" if stale else ""),
+          flush=True)
     t0 = time.perf_counter()
     if todo:
         (_ray if args.ray else _pool)(todo, runs, args.workers)

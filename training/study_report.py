@@ -192,6 +192,7 @@ def plot_curves(groups, path: Path, probe: str) -> bool:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import EngFormatter, MaxNLocator
     cells = sorted({c for (c, a) in groups if split_cell(c)[0] == probe and a in ("ppo", "sac")},
                    key=lambda c: (split_cell(c)[1] != "Plane", c))
     if not cells:
@@ -218,6 +219,8 @@ def plot_curves(groups, path: Path, probe: str) -> bool:
         ax.set_title(split_cell(cell)[1], fontsize=9)
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("env steps", fontsize=8)
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 400k, 1M: readable at this size
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
