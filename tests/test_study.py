@@ -2,7 +2,6 @@
 the statistics and verdicts, --quick end to end (process pool and Ray give the same rows)."""
 import csv
 import json
-import shutil
 import sys
 
 import numpy as np

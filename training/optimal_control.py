@@ -9,10 +9,10 @@ the stadium, reach and park tasks), each problem is solved twice:
 
 * **impacts allowed**: the real table; the final state and its derivatives come from
   ``penny_env.simulate(..., sensitivities=True)`` (saltation matrices through every impact);
-* **impacts forbidden**: both ends kept at least ``margin`` off the wall at every sample time
-  (row ends and ``SUBSAMPLES`` points inside each control row; the flow and its derivatives are exact,
-  physics/sensitivity.flow_jacobians), checked afterwards by simulating the solution on the table (no
-  impact, and at least half the margin at 40 samples per row).
+* **impacts forbidden**: both ends kept at least ``margin`` off the wall at every sample time (row ends
+  and ``training.shooting.SUBSAMPLES`` points inside each control row; the flow and its derivatives are
+  exact, physics/sensitivity.flow_jacobians), checked afterwards by simulating the solution on the table
+  (no impact, and at least half the margin at 40 samples per row).
 
 Method: shooting over the K control rows (held for the scene's control_dt, as the environments act),
 scaled torques v = u / torque_limit in [-1, 1], SLSQP (scipy.optimize) with the exact gradients. The
@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 import penny_env as pe
-from training.shooting import SEGMENT_ROWS, SUBSAMPLES, MultipleShooting, segment_bounds, wall_values
+from training.shooting import SEGMENT_ROWS, MultipleShooting, segment_bounds, wall_values
 
 EFFORT_ROWS = 30      # minimum effort: horizon in control rows (1.5 s at 0.05 s)
 MAX_ROWS = 40         # minimum time: the longest horizon tried
@@ -226,7 +226,7 @@ def solve_best(prob, K, starts=(), random_starts=0, seed=0, maxiter=200):
 
 def dense_clearance(prob, traj, per_row=40):
     """min over both ends of -h(end) along traj, sampled per_row times per control row: the margin is
-    enforced at SUBSAMPLES + 1 points per row and checked here between them (to half the margin)."""
+    enforced at shooting.SUBSAMPLES + 1 points per row and checked here between them (to half the margin)."""
     t = np.linspace(0.0, traj.final_time, max(2, int(round(traj.final_time / prob.dt)) * per_row + 1))
     return -max(max(wall_values(prob, st)) for st in traj.states_at(t))
 

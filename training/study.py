@@ -3,15 +3,15 @@
     python -m training.study [--config configs/study/default.yaml] [--runs runs/study] [--out docs/study.md]
                              [--workers N] [--ray] [--quick]
 
-Jobs are keyed by (cell, agent, seed): a cell is a probe env id (docs/study_probes.md), an agent
-PPO or SAC (SB3, trained then evaluated) or a reference (zero, random, feedback). Each job writes
-its files under RUNS/<cell>/<agent>/seed<k>/ and, last, result.json; a rerun skips the jobs that
-have one made with the same job config (a changed budget or hyperparameter runs the job again), so a
-crash or a stop loses nothing. The jobs run in a process pool on all local cores (--workers) with a progress bar, or with --ray as Ray tasks on the cluster named by RAY_ADDRESS
-(a local Ray instance when it is unset; a cluster needs penny_env installed and --runs on a
-shared file system). The report (training/study_report.py) goes to --out, with its CSV and PNGs
-beside it. --quick runs configs/study/quick.yaml (a few minutes on 2 cores, learns nothing) and
-never writes into docs/.
+Jobs are keyed by (cell, agent, seed): a cell is a probe env id (docs/study_probes.md), an agent PPO or
+SAC (SB3, trained then evaluated) or a reference (zero, random, feedback). Each job writes its files
+under RUNS/<cell>/<agent>/seed<k>/ and, last, result.json; a rerun skips the jobs that have one made
+with the same job config (a changed budget or hyperparameter runs the job again), so a crash or a stop
+loses nothing. The jobs run in a process pool on all local cores (--workers) with a progress bar, or
+with --ray as Ray tasks on the cluster named by RAY_ADDRESS (a local Ray instance when it is unset; a
+cluster needs penny_env installed and --runs on a shared file system). The report
+(training/study_report.py) goes to --out, with its CSV and PNGs beside it. --quick runs
+configs/study/quick.yaml (a few minutes on 2 cores, learns nothing) and never writes into docs/.
 """
 from __future__ import annotations
 
