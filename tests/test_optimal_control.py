@@ -57,7 +57,13 @@ def test_minimum_time_is_the_fewest_rows():
 
 
 def test_quick_run_writes_report_outside_docs(tmp_path):
-    out = oc.main(["--quick", "--workers", "2", "--out", str(tmp_path / "oc.md")])
+    import subprocess
+    import sys
+    # the command line, as users run it; then the saved solves reload in this process (--report-only)
+    root = oc.Path(oc.__file__).resolve().parents[1]
+    subprocess.run([sys.executable, "-m", "training.optimal_control", "--quick", "--workers", "2", "--out",
+                    str(tmp_path / "oc.md")], cwd=root, check=True, capture_output=True)
+    out = tmp_path / "oc.md"
     text = out.read_text()
     assert "| ellipse | reach | effort | both | 2 |" in text and "Failed solves" in text
     # the multiple-shooting cross-check ran on the first pair, both variants, and found the same optima

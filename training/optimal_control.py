@@ -581,8 +581,7 @@ def main(argv=None):
         if not saved.is_file():
             raise SystemExit(f"no saved solves at {saved} (run without --report-only / --cross-check-only first)")
         with open(saved, "rb") as f:
-            rows, seconds, *rest = pickle.load(f)
-        commands = rest[0] if rest else [cmd.split(" --cross-check-pairs")[0]]
+            rows, seconds, commands = pickle.load(f)
     else:
         rows = study(n_pairs, args.seed, scenes=scenes, tasks=tasks, objectives=objectives, workers=args.workers,
                      **quick)
@@ -611,4 +610,8 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    # run the importable module's main, so that rows.pkl names its classes training.optimal_control.Solution
+    # (not __main__.Solution) and loads from any entry point
+    from training.optimal_control import main as module_main
+
+    module_main()
