@@ -30,6 +30,10 @@ def _cfg(tmp_path, text):
     ("seeds: [0, 1]", "seeds: [0, 1]\nbudget: 3", "unknown config key\\(s\\) \\['budget'\\]"),
     ("seeds: [0, 1]", "seeds: [0, -1]", "seeds must be"),
     ("timesteps: {ppo: 1024, sac: 256}", "timesteps: {ppo: 1024, sac: 256, a2c: 5}", "timesteps: unknown algorithm"),
+    ("seeds: [0, 1]", "seeds: [0, 1]\ntimesteps_per_probe: {Park: {ppo: 5}}", "timesteps_per_probe: unknown probe 'Park'"),
+    ("seeds: [0, 1]", "seeds: [0, 1]\ntimesteps_per_probe: {Both: {td3: 5}}", "timesteps_per_probe.Both: unknown algorithm"),
+    ("seeds: [0, 1]", "seeds: [0, 1]\ntimesteps_per_probe: {Both: {ppo: 0}}", "timesteps_per_probe.Both.ppo must be"),
+    ("seeds: [0, 1]", "seeds: [0, 1]\ntimesteps_per_probe: [Both]", "timesteps_per_probe must map"),
 ])
 def test_bad_config_named_before_training(tmp_path, capsys, old, new, match):
     assert old in QUICK
@@ -40,6 +44,18 @@ def test_bad_config_named_before_training(tmp_path, capsys, old, new, match):
         study.main(["--config", path, "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "r.md")])
     assert "error:" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()  # nothing started
+
+
+def test_per_probe_budget_overrides_only_that_probe(tmp_path):
+    path = _cfg(tmp_path, QUICK + "timesteps_per_probe: {Both: {sac: 512}}\n")
+    jobs = study.make_jobs(study.load_config(path))
+    budget = {(j["cell"], j["agent"]): j.get("timesteps") for j in jobs}
+    assert budget[("PennyProbeBoth-Plane-v0", "sac")] == 512
+    assert budget[("PennyProbeBoth-Plane-v0", "ppo")] == 1024
+    assert budget[("PennyProbeDrive-Plane-v0", "sac")] == 256
+    default = study.make_jobs(study.load_config(study.QUICK_CONFIG))
+    assert [j for j in default if j["cell"] != "PennyProbeBoth-Plane-v0" or j["agent"] != "sac"] == \
+        [j for j in jobs if j["cell"] != "PennyProbeBoth-Plane-v0" or j["agent"] != "sac"]  # the others are not rerun
 
 
 def test_ray_missing_is_named(tmp_path, monkeypatch, capsys):

@@ -33,6 +33,8 @@ QUICK_CONFIG = ROOT / "configs" / "study" / "quick.yaml"
 AGENTS = ALGOS + REFERENCE_AGENTS
 KEYS = {"cells", "agents", "seeds", "eval_episodes", "curve_points", "curve_episodes", "timesteps",
         "num_envs", "hyperparameters"}
+OPTIONAL_KEYS = {"timesteps_per_probe"}  # {probe: {algo: steps}}: a longer budget where a probe learns slower
+PROBES = ("Steer", "Drive", "Both")
 
 
 def probe_cells() -> list[str]:
@@ -53,9 +55,9 @@ def load_config(path) -> dict:
         raise ValueError(f"{path}: invalid YAML: {exc}") from None
     if not isinstance(cfg, dict):
         raise ValueError(f"{path}: a study config must be a mapping")
-    unknown = sorted(set(cfg) - KEYS)
+    unknown = sorted(set(cfg) - KEYS - OPTIONAL_KEYS)
     if unknown:
-        raise ValueError(f"{path}: unknown config key(s) {unknown}; known: {sorted(KEYS)}")
+        raise ValueError(f"{path}: unknown config key(s) {unknown}; known: {sorted(KEYS | OPTIONAL_KEYS)}")
     missing = sorted(KEYS - set(cfg))
     if missing:
         raise ValueError(f"{path}: missing config key(s) {missing}")
@@ -93,7 +95,35 @@ def load_config(path) -> dict:
         extra = sorted(set(cfg[k] or {}) - set(ALGOS)) if isinstance(cfg[k], dict) else [cfg[k]]
         if extra:
             raise ValueError(f"{path}: {k}: unknown algorithm(s) {extra}; known: {list(ALGOS)}")
+    cfg["timesteps_per_probe"] = _check_per_probe(path, cfg.get("timesteps_per_probe"))
     return cfg
+
+
+def _check_per_probe(path, per_probe) -> dict:
+    """timesteps_per_probe: {Steer|Drive|Both: {ppo|sac: positive int}}, overriding timesteps for that probe's cells."""
+    if per_probe is None:
+        return {}
+    if not isinstance(per_probe, dict):
+        raise ValueError(f"{path}: timesteps_per_probe must map a probe ({', '.join(PROBES)}) to "
+                         f"{{algorithm: timesteps}}, got {per_probe!r}")
+    for probe, budgets in per_probe.items():
+        if probe not in PROBES:
+            raise ValueError(f"{path}: timesteps_per_probe: unknown probe {probe!r}; known: {list(PROBES)}")
+        if not isinstance(budgets, dict):
+            raise ValueError(f"{path}: timesteps_per_probe.{probe} must map an algorithm to timesteps, got {budgets!r}")
+        for algo, v in budgets.items():
+            if algo not in ALGOS:
+                raise ValueError(f"{path}: timesteps_per_probe.{probe}: unknown algorithm {algo!r}; known: {list(ALGOS)}")
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{path}: timesteps_per_probe.{probe}.{algo} must be a positive integer, got {v!r}")
+    return per_probe
+
+
+def timesteps_of(cfg, cell: str, algo: str) -> int:
+    """The training budget of one cell: the probe's own (timesteps_per_probe) if it has one, else timesteps."""
+    from training.study_report import split_cell
+    per_probe = cfg.get("timesteps_per_probe") or {}
+    return per_probe.get(split_cell(cell)[0], {}).get(algo, cfg["timesteps"][algo])
 
 
 def make_jobs(cfg) -> list[dict]:
@@ -110,7 +140,7 @@ def make_jobs(cfg) -> list[dict]:
             for seed in cfg["seeds"]:
                 job = {"cell": cell, "agent": agent, "seed": seed, "eval_episodes": cfg["eval_episodes"]}
                 if agent in ALGOS:
-                    job.update(timesteps=cfg["timesteps"][agent], num_envs=cfg["num_envs"][agent],
+                    job.update(timesteps=timesteps_of(cfg, cell, agent), num_envs=cfg["num_envs"][agent],
                                hyperparameters=(cfg["hyperparameters"] or {}).get(agent) or {},
                                curve_points=cfg["curve_points"], curve_episodes=cfg["curve_episodes"])
                 jobs.append(job)

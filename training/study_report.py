@@ -271,7 +271,8 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
               f"{cpu_seconds / cores / 60:.0f} min on this machine's {cores} cores if nothing else runs); "
               f"the jobs ran from {span[0]} to {span[1]} UTC ({span[2] / 60:.0f} min, from their result files); wall "
               f"time of this invocation {seconds:.0f} s (finished jobs are not rerun). Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
-              f"budgets {cfg['timesteps']} env steps. Probe tasks: [study_probes.md](study_probes.md).", ""]
+              f"budgets {cfg['timesteps']} env steps" + (f", per probe {cfg['timesteps_per_probe']}" if cfg.get("timesteps_per_probe") else "")
+              + ". Probe tasks: [study_probes.md](study_probes.md).", ""]
     lines += ["## Proven (not observed)", "",
               "- On the open plane with u2 = 0 (steer only), (I + m R^2) theta'' = 0: theta_dot is conserved, so the "
               "steer probe's start (|R theta_dot| >= 0.03 m/s > the 0.01 m/s speed tolerance) can never come to rest.",
