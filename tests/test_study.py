@@ -135,6 +135,27 @@ def test_verdict_from_intervals():
     assert verdict([_row("Plane", "ppo", 0.5, 0.4, 0.6)])[0] == "inconclusive"
 
 
+def test_last_quarter_change_interpolates():
+    from training.study_report import last_quarter_change
+    curve = [[0, 0.0], [100, 0.2], [200, 0.4], [300, 0.6], [400, 1.0]]
+    assert last_quarter_change(curve) == pytest.approx(1.0 - 0.6)
+    assert last_quarter_change([[0, 0.1], [350, 0.5], [700, 0.5], [1000, 0.9]]) == pytest.approx(0.9 - 0.5 - 0.4 * 50 / 300)
+
+
+def test_flattening_counts_only_solved_cells_and_rising_curves():
+    from training.study_report import FLAT, flattening
+
+    def row(table, agent, low, change):
+        return dict(_row(table, agent, low + 0.05, low, low + 0.1), cell=f"PennyProbeBoth-{table}-v0",
+                    curve_last_change=change)
+    rows = [row("Plane", "ppo", 0.5, FLAT + 0.01), row("Plane", "sac", 0.2, FLAT - 0.01),
+            row("Ellipse-Elastic", "ppo", 0.0, 0.3), row("Ellipse-Elastic", "sac", 0.0, 0.2),  # unsolved
+            row("Stadium-E05", "ppo", 0.4, -0.1), row("Stadium-E05", "zero", 0.9, "")]
+    solved, rising = flattening(rows)
+    assert solved == ["PennyProbeBoth-Plane-v0", "PennyProbeBoth-Stadium-E05-v0"]
+    assert [(r["table"], r["agent"]) for r in rising] == [("Plane", "ppo")]
+
+
 @pytest.fixture(scope="module")
 def quick_pool(tmp_path_factory):
     runs = tmp_path_factory.mktemp("quick_pool")

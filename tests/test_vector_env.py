@@ -33,7 +33,7 @@ def test_equivalence_with_single_env(env_id, backend):
         ov, rv, tv, trv, iv = venv.step(acts[t])
         for i, s in enumerate(singles):
             if s._done:  # NEXT_STEP autoreset
-                o, _ = s.reset()
+                o, info = s.reset()
                 r, te, tr, n_imp = 0.0, False, False, 0
             else:
                 o, r, te, tr, info = s.step(acts[t, i])
@@ -49,8 +49,11 @@ def test_equivalence_with_single_env(env_id, backend):
             assert te == tv[i] and tr == trv[i]
             assert r == pytest.approx(rv[i], rel=1e-12, abs=1e-12)
             assert np.allclose(o, ov[i], rtol=0, atol=2e-7)
-            if exact:  # the compiled step runs PennyEnv's operations: bitwise, observations included
+            for key in ("kinetic_energy", "time", "distance"):
+                assert info[key] == pytest.approx(iv[key][i], rel=1e-12, abs=1e-15), (t, i, key)
+            if exact:  # the compiled step runs PennyEnv's operations: bitwise, observations and info included
                 assert np.array_equal(S1, S2) and r == rv[i] and np.array_equal(o, ov[i]), (t, i)
+                assert info["kinetic_energy"] == iv["kinetic_energy"][i] and info["distance"] == iv["distance"][i]
             impacts += n_imp
     if PRESETS[env_id]["scene"] != "plane":
         assert impacts > 0
@@ -110,6 +113,30 @@ def test_per_env_seeding_and_reset_mask():
     venv.reset(options={"reset_mask": np.array([False, True, False])})
     after = venv.states
     assert np.array_equal(before[[0, 2]], after[[0, 2]]) and not np.array_equal(before[1], after[1])
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_returned_observations_are_the_callers(mode):
+    """A step returns a new array: a later step or a partial reset does not change the one a caller
+    kept, and a caller writing into it does not change the envs (obs of a partial reset included)."""
+    venv = PennyVectorEnv(4, "stadium", "reach", max_episode_steps=3, autoreset_mode=mode)
+    o0, _ = venv.reset(seed=3)
+    kept = [o0, o0.copy()]
+    a = np.full((4, 2), 0.7, np.float32)
+    for t in range(7):
+        o, *_ = venv.step(a)
+        kept += [o, o.copy()]
+    o_mask, _ = venv.reset(options={"reset_mask": np.array([True, False, False, False])})
+    for got, copy in zip(kept[::2], kept[1::2]):
+        assert np.array_equal(got, copy)
+    o[:] = 99.0  # the caller's own array now
+    twin = PennyVectorEnv(4, "stadium", "reach", max_episode_steps=3, autoreset_mode=mode)
+    twin.reset(seed=3)
+    for t in range(7):
+        twin.step(a)
+    o_twin, _ = twin.reset(options={"reset_mask": np.array([True, False, False, False])})
+    assert np.array_equal(o_mask, o_twin)
+    assert np.array_equal(venv.step(a)[0], twin.step(a)[0])
 
 
 def test_bad_actions_name_the_sub_env_and_keep_states():

@@ -53,6 +53,13 @@ def load_results(jobs, runs) -> dict:
     return groups
 
 
+def last_quarter_change(curve) -> float:
+    """The rise of a learning curve [[timesteps, success], ...] over the last quarter of training: its
+    last point minus the curve (linearly interpolated) at 3/4 of the last point's timesteps."""
+    t, y = np.asarray(curve, float).T
+    return float(y[-1] - np.interp(0.75 * t[-1], t, y))
+
+
 def cell_rows(groups) -> list[dict]:
     rows = []
     for (cell, agent), results in groups.items():
@@ -66,7 +73,7 @@ def cell_rows(groups) -> list[dict]:
         change = ""
         curves = [r["curve"] for r in results if r["curve"]]
         if curves and all(len(c) >= 2 for c in curves):
-            change = float(np.mean([c[-1][1] - c[round(0.75 * (len(c) - 1))][1] for c in curves]))
+            change = float(np.mean([last_quarter_change(c) for c in curves]))
         rows.append({
             "probe": probe, "table": table, "cell": cell, "agent": agent, "seeds": len(results),
             "episodes": int(succ.size), "success": float(succ.mean()), "ci_low": lo, "ci_high": hi,
@@ -139,6 +146,19 @@ def paired_times(groups, probe: str = "Both") -> list[dict]:
 
 README_BEGIN = "<!-- study-answer: written by python -m training.study (training/study_report.py, readme_answer) -->"
 README_END = "<!-- /study-answer -->"
+
+
+FLAT = 0.05  # a learning curve has flattened when its success rate rose by less than this over the last quarter
+
+
+def flattening(rows: list[dict]) -> tuple[list[str], list[dict]]:
+    """(solved cells, their PPO/SAC rows whose curve has not flattened). A cell is solved when its best
+    trained agent's 95 % interval lies above 0; a curve has flattened when its "last change" (the mean
+    over seeds of the success rate's rise over the last quarter of training) is below FLAT."""
+    rl = [r for r in rows if r["agent"] in ("ppo", "sac") and r["curve_last_change"] != ""]
+    solved = sorted({r["cell"] for r in rl if r["ci_low"] > 0})
+    rising = [r for r in rl if r["cell"] in solved and r["curve_last_change"] >= FLAT]
+    return solved, rising
 
 
 def readme_answer(rows: list[dict], report: str = "docs/study.md") -> str:
@@ -319,12 +339,21 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
             diff = (f"{r['mean_diff_s']:+.2f} [{r['ci_low']:+.2f}, {r['ci_high']:+.2f}]" if r["pairs"] else "-")
             share = f"{r['table_faster']:.2f}" if r["pairs"] else "-"
             lines.append(f"| {r['table']} | {r['agent']} | {r['pairs']} | {diff} | {share} |")
+    solved, rising = flattening(rows)
+    n_curves = sum(1 for r in rows if r["cell"] in solved and r["agent"] in ("ppo", "sac"))
+    lines += ["", "## Have the learning curves flattened?", "",
+              f"Rule: a cell is solved when its best trained agent's interval lies above 0; a curve has flattened "
+              f"when its \"last change\" (below) is under {FLAT:+.2f}. Solved cells: {len(solved)}; "
+              f"{n_curves - len(rising)} of their {n_curves} PPO/SAC curves have flattened"
+              + (", all of them." if not rising else ". Still rising: " + "; ".join(
+                  f"{r['probe']} {r['table']} {r['agent']} {r['curve_last_change']:+.2f}" for r in rising) + ".")]
     lines += ["", "## Observed, per cell", "",
               "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % two-level "
               "bootstrap interval (seeds, then episodes; 2000 resamples). time: mean time to success [s]. impact "
               "share: share of successful episodes with at least one impact. impacts/success: mean impacts in a "
               "successful episode. last change: mean change of the eval success rate over the last quarter "
-              "of the learning curve (last point minus the point at 3/4 of training; near 0: flattened).", "",
+              "of the learning curve (last point minus the curve, linearly interpolated, at 3/4 of training; near 0: "
+              "flattened).", "",
               "| probe | table | agent | success [95 % CI] | time [s] | impact share | impacts/success | last change |",
               "| --- | --- | --- | --- | ---: | ---: | ---: | ---: |"]
     for r in rows:

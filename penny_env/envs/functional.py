@@ -102,6 +102,15 @@ def write_row(obs, i, o):
         obs[i, 10] = o[10]
 
 
+def kinetic_energy(s, p):
+    """0.5 (I + m R^2) theta_dot^2 + 0.5 J phi_dot^2 of state s (a tuple, or a (6, N) array: the resets),
+    the info's ``kinetic_energy``: one formula for the single and the vector env, bitwise the same.
+    Squares as products: numba and numpy square by multiplying, but Python's float ``**`` calls libm's
+    pow, which here differs from x * x in about 1 of 1300 draws (found by tests/test_env_step.py)."""
+    W, w = s[4], s[5]
+    return 0.5 * (p.Itot * (W * W) + p.J * (w * w))
+
+
 def angle_trig(s):
     """(cos theta, sin theta, cos phi, sin phi) of state s."""
     return math.cos(s[2]), math.sin(s[2]), math.cos(s[3]), math.sin(s[3])
@@ -144,8 +153,9 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     count the arc impacts, reward, termination, truncation and observation; impact times and ends
     go into row `row` of times and ends (see transition).
 
-    Returns (state, trig, observation, impacts, count, distance, reward, terminated, truncated)
-    with trig angle_trig(state), observation observe()'s tuple, count the running arc count."""
+    Returns (state, trig, observation, impacts, count, distance, reward, terminated, truncated,
+    kinetic energy) with trig angle_trig(state), observation observe()'s tuple, count the running arc
+    count."""
     a0 = clip_action(a0)
     if p.n_act == 2:
         a1 = clip_action(a1)
@@ -161,15 +171,16 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     r, success = step_reward(k, d_prev, d, s1[4], s1[5], ctrl, n_arc, count, XP)
     trig1 = angle_trig(s1)
     o = observe(s1, trig1, tx, ty, count, p)
-    return s1, trig1, o, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps
+    return s1, trig1, o, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps, kinetic_energy(s1, p)
 
 
 def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, m, k,
-              obs, rew, term, trunc, n_imp, times, ends):
+              obs, rew, term, trunc, n_imp, times, ends, ke):
     """env_step over every env i not in skip (in parallel when compiled), in place: S (6, N),
     trig (4, N), count, dist, steps and time advance; obs, rew, term, trunc, n_imp, times (N, K)
-    (NaN-padded) and ends (N, K) (0-padded) receive the step's results. Skipped envs (they reset
-    at this step, NEXT_STEP autoreset) keep their state and get zero rewards and no flags."""
+    (NaN-padded), ends (N, K) (0-padded) and ke (kinetic energy) receive the step's results.
+    Skipped envs (they reset at this step, NEXT_STEP autoreset) keep their state and get zero
+    rewards and no flags; their obs and ke rows are left for the caller (it resets them)."""
     for i in prange(S.shape[1]):
         for j in range(times.shape[1]):
             times[i, j] = np.nan
@@ -183,9 +194,9 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
         s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
         tr = (trig[0, i], trig[1, i], trig[2, i], trig[3, i])
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
-        s1, tr1, o, n, c, d, r, te, tu = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
-                                                     arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m, k,
-                                                     times, ends, i)
+        s1, tr1, o, n, c, d, r, te, tu, e = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
+                                                        arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m, k,
+                                                        times, ends, i)
         write_row(obs, i, o)
         for row in range(6):
             S[row, i] = s1[row]
@@ -199,6 +210,7 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
         rew[i] = r
         term[i] = te
         trunc[i] = tu
+        ke[i] = e
 
 
 def observe_rows(rows, S, trig, target, count, p, obs):
@@ -225,18 +237,18 @@ def env_step_packed(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
     of obs (1, obs_dim), the impacts into row 0 of times and ends (1, K); returns env_step's tuple
     without the observation."""
     pt, mt, kt = consts
-    s1, trig1, o, n, c, d, r, te, tu = env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
-                                                EnvParams(*pt), Model(*mt), TaskConstants(*kt), times, ends, 0)
+    s1, trig1, o, n, c, d, r, te, tu, e = env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
+                                                   EnvParams(*pt), Model(*mt), TaskConstants(*kt), times, ends, 0)
     write_row(obs, 0, o)
-    return s1, trig1, n, c, d, r, te, tu
+    return s1, trig1, n, c, d, r, te, tu, e
 
 
 def step_envs_packed(S, trig, actions, skip, target, arc, count, dist, steps, time, consts,
-                     obs, rew, term, trunc, n_imp, times, ends):
+                     obs, rew, term, trunc, n_imp, times, ends, ke):
     """step_envs with consts = pack(p, m, k) (PennyVectorEnv's entry point)."""
     pt, mt, kt = consts
     step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, EnvParams(*pt), Model(*mt),
-              TaskConstants(*kt), obs, rew, term, trunc, n_imp, times, ends)
+              TaskConstants(*kt), obs, rew, term, trunc, n_imp, times, ends, ke)
 
 
 def observe_rows_packed(rows, S, trig, target, count, consts, obs):
@@ -277,7 +289,7 @@ def compiled_env_functions() -> dict:
         namespace[name] = phys[name]
     for f in (tasks.on_arc, tasks.step_reward):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    for f in (clip_action, observe, angle_trig):
+    for f in (clip_action, observe, angle_trig, kinetic_energy):
         namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
     # inlined: a call that passes arrays increments and decrements their reference counts, atomically
     inline = numba.njit(cache=True, inline="always")

@@ -11,7 +11,7 @@ from gymnasium.error import ResetNeeded
 
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys
-from .functional import env_functions, env_params, pack
+from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
@@ -214,14 +214,10 @@ class PennyEnv(gym.Env):
         self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
         obs = np.empty((1, core.obs_dim), dtype=np.float32)
         self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
-        info = {"kinetic_energy": self._energy(), "time": 0.0, "distance": self._d}
+        info = {"kinetic_energy": kinetic_energy(self._s, self._p), "time": 0.0, "distance": self._d}
         if self.render_mode == "human":
             self.render()
         return obs[0], info
-
-    def _energy(self):
-        s = self._s
-        return 0.5 * (self._core.Itot * s[4] ** 2 + self._core.J * s[5] ** 2)
 
     def step(self, action):
         if self._s is None:
@@ -240,7 +236,7 @@ class PennyEnv(gym.Env):
         if n_imp > self._times.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
             self._times, self._ends = np.empty((1, n_imp)), np.empty((1, n_imp), dtype=np.int64)
             out = self._fns["env_step"](*args, self._times, self._ends)
-        s, self._trig, n_imp, self._count, d, reward, terminated, truncated = out
+        s, self._trig, n_imp, self._count, d, reward, terminated, truncated, energy = out
         self._s = s
         self._d = d
         self._steps += 1
@@ -249,9 +245,8 @@ class PennyEnv(gym.Env):
             times, ends = tuple(self._times[0, :n_imp].tolist()), tuple(self._ends[0, :n_imp].tolist())
         else:
             times = ends = ()
-        W, w = s[4], s[5]
         info = {"impacts": n_imp, "impact_times": times, "impact_ends": ends,
-                "kinetic_energy": 0.5 * (c.Itot * W ** 2 + c.J * w ** 2), "time": self._t, "distance": d,
+                "kinetic_energy": energy, "time": self._t, "distance": d,
                 "is_success": terminated}
         if c.impacts:
             info["arc_impacts"] = self._count

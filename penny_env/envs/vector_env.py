@@ -8,10 +8,9 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..physics import kinetic_energy
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys, X, Y
-from .functional import env_functions, env_params, pack
+from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
 MAX_IMPACTS_IN_INFO = 8
@@ -154,7 +153,7 @@ class PennyVectorEnv(VectorEnv):
         self._fns["step_envs"](S, trig, np.zeros((1, 2)), np.zeros(1, dtype=bool), np.zeros((2, 1)), np.zeros((2, 1)),
                                ints(), np.zeros(1), ints(), np.zeros(1), self._consts, obs, np.zeros(1),
                                np.zeros(1, dtype=bool), np.zeros(1, dtype=bool), ints(),
-                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8))
+                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8), np.zeros(1))
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -206,15 +205,15 @@ class PennyVectorEnv(VectorEnv):
             self._t = np.zeros(n)
             self._trig = np.zeros((4, n))  # cos/sin of theta and phi of self._S (the certificate uses them)
             self._d = np.zeros(n)
-            self._obs = np.zeros((n, c.obs_dim), dtype=np.float32)
             self._trails = [[] for _ in range(n)] if self.render_mode else None
-        rows = self._reset_envs(mask, states, targets)
+        self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
-        self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._consts, self._obs)
+        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # every row: the envs outside a reset_mask keep their state
+        self._fns["observe_rows"](np.arange(n), self._S, self._trig, self._target, self._count, self._consts, obs)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
-                          np.zeros(n, dtype=bool))
-        return self._obs.copy(), info
+                          kinetic_energy(self._S, self._p), np.zeros(n, dtype=bool))
+        return obs, info
 
     def _reset_envs(self, mask, states=None, targets=None):
         """Draw the next episode of the envs in mask (their trig and obs: observe_rows); returns their indices."""
@@ -248,28 +247,30 @@ class PennyVectorEnv(VectorEnv):
         next_step = self.autoreset_mode == AutoresetMode.NEXT_STEP
         skip = self._autoreset if next_step else np.zeros(n, dtype=bool)
         K = self.max_impacts_in_info
-        obs = self._obs
+        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # a new array each step: the caller may keep it
         rew = np.empty(n)
         term = np.empty(n, dtype=bool)
         trunc = np.empty(n, dtype=bool)
         n_imp = np.empty(n, dtype=np.int64)
         times = np.empty((n, K))
         ends = np.empty((n, K), dtype=np.int8)
+        energy = np.empty(n)
         self._fns["step_envs"](self._S, self._trig, a, skip, self._target, self._arc, self._count, self._d,
                                self._steps, self._t, self._consts, obs, rew, term, trunc, n_imp,
-                               times, ends)
+                               times, ends, energy)
         self._extend_trails()
         done = term | trunc
         if next_step and skip.any():  # the envs whose episode ended at the previous step reset now
             self._episodes[skip] += np.uint64(1)
-            self._fns["observe_rows"](self._reset_envs(skip), self._S, self._trig, self._target, self._count,
-                                      self._consts, obs)
-        info = self._info(n_imp, times, ends, term)
+            rows = self._reset_envs(skip)
+            self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._consts, obs)
+            energy[rows] = kinetic_energy(self._S[:, rows], self._p)
+        info = self._info(n_imp, times, ends, energy, term)
         if next_step:
             self._autoreset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             self._end_episodes_same_step(info, obs, done, term)
-        return obs.copy(), rew, term, trunc, info
+        return obs, rew, term, trunc, info
 
     def _end_episodes_same_step(self, info, obs, done, terminated):
         """SAME_STEP autoreset: the last obs and info of the envs whose episode ended go to
@@ -293,10 +294,10 @@ class PennyVectorEnv(VectorEnv):
                 self._trails[i].append((self._S[X, i], self._S[Y, i]))
                 del self._trails[i][:-200]
 
-    def _info(self, counts, times, ends, success):
+    def _info(self, counts, times, ends, energy, success):
         t = self._true
         info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
-                "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": kinetic_energy(self._S, self._core.params),
+                "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": energy,
                 "_kinetic_energy": t.copy(), "time": self._t.copy(), "_time": t.copy(), "distance": self._d.copy(),
                 "_distance": t.copy(), "is_success": success.copy(), "_is_success": t.copy()}
         if self._core.impacts:

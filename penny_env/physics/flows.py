@@ -139,4 +139,5 @@ def end_kinematics(s, sigma, R):
 
 def kinetic_energy(s, params):
     """0.5 (I + m R^2) theta_dot^2 + 0.5 J phi_dot^2 for states on the constraint distribution."""
-    return 0.5 * (params.rolling_inertia * s[THETA_DOT] ** 2 + params.J * s[PHI_DOT] ** 2)
+    W, w = s[THETA_DOT], s[PHI_DOT]
+    return 0.5 * (params.rolling_inertia * (W * W) + params.J * (w * w))  # products: libm's pow(x, 2) != x * x
