@@ -58,6 +58,16 @@ def test_per_probe_budget_overrides_only_that_probe(tmp_path):
         [j for j in jobs if j["cell"] != "PennyProbeBoth-Plane-v0" or j["agent"] != "sac"]  # the others are not rerun
 
 
+def test_large_config_reruns_only_the_both_controls_sac_jobs():
+    """configs/study/large.yaml is the default with a longer SAC budget on the both-controls probe: after a
+    default run it reruns only those jobs (the stale check keys on the whole job config)."""
+    default = study.make_jobs(study.load_config(study.DEFAULT_CONFIG))
+    large = study.make_jobs(study.load_config(study.ROOT / "configs" / "study" / "large.yaml"))
+    changed = [(a["cell"], a["agent"]) for a, b in zip(default, large, strict=True) if a != b]
+    assert changed and all(c.startswith("PennyProbeBoth-") and a == "sac" for c, a in changed)
+    assert len(changed) == 7 * 5
+
+
 def test_ray_missing_is_named(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
     with pytest.raises(SystemExit):
