@@ -155,12 +155,13 @@ def test_last_quarter_change_interpolates():
 def test_flattening_counts_only_solved_cells_and_rising_curves():
     from training.study_report import FLAT, flattening
 
-    def row(table, agent, low, change):
+    def row(table, agent, low, change, last=0.5):
         return dict(_row(table, agent, low + 0.05, low, low + 0.1), cell=f"PennyProbeBoth-{table}-v0",
-                    curve_last_change=change)
+                    curve_last_change=change, curve_last=last)
     rows = [row("Plane", "ppo", 0.5, FLAT + 0.01), row("Plane", "sac", 0.2, FLAT - 0.01),
             row("Ellipse-Elastic", "ppo", 0.0, 0.3), row("Ellipse-Elastic", "sac", 0.0, 0.2),  # unsolved
-            row("Stadium-E05", "ppo", 0.4, -0.1), row("Stadium-E05", "zero", 0.9, "")]
+            row("Stadium-E05", "ppo", 0.4, -0.1), row("Stadium-E05", "zero", 0.9, "", ""),
+            row("Stadium-E05", "sac", 0.9, FLAT + 0.01, 1 - FLAT / 2)]  # at the ceiling: no room to rise
     solved, rising = flattening(rows)
     assert solved == ["PennyProbeBoth-Plane-v0", "PennyProbeBoth-Stadium-E05-v0"]
     assert [(r["table"], r["agent"]) for r in rising] == [("Plane", "ppo")]
@@ -259,6 +260,16 @@ def test_readme_answer_is_the_reports():
         rows = list(csv.DictReader(f))
     assert block == readme_answer(rows)
     assert "impacts needed" in block or "impacts not needed" in block or "inconclusive" in block
+
+
+def test_readme_says_what_the_report_computes_of_the_curves():
+    """The README claims flattened curves only if the committed report's rows say so."""
+    from training.study_report import _num, flattening
+    with open(study.ROOT / "docs" / "study.csv") as f:
+        rows = [{k: _num(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    solved, rising = flattening(rows)
+    claim = "the learning curves of every solved cell have flattened" in (study.ROOT / "README.md").read_text()
+    assert solved and claim == (not rising), [(r["cell"], r["agent"], r["curve_last_change"]) for r in rising]
 
 
 def test_readme_answer_follows_the_verdicts():

@@ -19,7 +19,7 @@ import numpy as np
 B = 2000
 PROBES = {"Steer": "steer only, park", "Drive": "drive only, reach off the heading line", "Both": "both controls, park"}
 ROW_FIELDS = ["probe", "table", "cell", "agent", "seeds", "episodes", "success", "ci_low", "ci_high",
-              "mean_time_s", "impact_share", "impacts_per_success", "curve_last_change"]
+              "mean_time_s", "impact_share", "impacts_per_success", "curve_last_change", "curve_last"]
 
 
 def bootstrap_ci(M: np.ndarray, seed: int = 0) -> tuple[float, float]:
@@ -70,17 +70,18 @@ def cell_rows(groups) -> list[dict]:
         ok = succ > 0
         lo, hi = bootstrap_ci(succ)
         probe, table = split_cell(cell)
-        change = ""
+        change = last = ""
         curves = [r["curve"] for r in results if r["curve"]]
         if curves and all(len(c) >= 2 for c in curves):
             change = float(np.mean([last_quarter_change(c) for c in curves]))
+            last = float(np.mean([c[-1][1] for c in curves]))
         rows.append({
             "probe": probe, "table": table, "cell": cell, "agent": agent, "seeds": len(results),
             "episodes": int(succ.size), "success": float(succ.mean()), "ci_low": lo, "ci_high": hi,
             "mean_time_s": float(time_[ok].mean()) if ok.any() else "",
             "impact_share": float((imp[ok] > 0).mean()) if ok.any() else "",
             "impacts_per_success": float(imp[ok].mean()) if ok.any() else "",
-            "curve_last_change": change})
+            "curve_last_change": change, "curve_last": last})
     rows.sort(key=lambda r: (r["probe"], r["table"] != "Plane", r["table"], r["agent"]))
     return rows
 
@@ -148,16 +149,18 @@ README_BEGIN = "<!-- study-answer: written by python -m training.study (training
 README_END = "<!-- /study-answer -->"
 
 
-FLAT = 0.05  # a learning curve has flattened when its success rate rose by less than this over the last quarter
+FLAT = 0.05  # a learning curve has flattened when its success rate rose by less than this over the last quarter,
+# or when it ends within FLAT of success 1 (no room left to rise)
 
 
 def flattening(rows: list[dict]) -> tuple[list[str], list[dict]]:
     """(solved cells, their PPO/SAC rows whose curve has not flattened). A cell is solved when its best
     trained agent's 95 % interval lies above 0; a curve has flattened when its "last change" (the mean
-    over seeds of the success rate's rise over the last quarter of training) is below FLAT."""
+    over seeds of the success rate's rise over the last quarter of training) is below FLAT, or when its
+    last point (mean over seeds) is above 1 - FLAT."""
     rl = [r for r in rows if r["agent"] in ("ppo", "sac") and r["curve_last_change"] != ""]
     solved = sorted({r["cell"] for r in rl if r["ci_low"] > 0})
-    rising = [r for r in rl if r["cell"] in solved and r["curve_last_change"] >= FLAT]
+    rising = [r for r in rl if r["cell"] in solved and r["curve_last_change"] >= FLAT and r["curve_last"] <= 1 - FLAT]
     return solved, rising
 
 
@@ -343,7 +346,8 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
     n_curves = sum(1 for r in rows if r["cell"] in solved and r["agent"] in ("ppo", "sac"))
     lines += ["", "## Have the learning curves flattened?", "",
               f"Rule: a cell is solved when its best trained agent's interval lies above 0; a curve has flattened "
-              f"when its \"last change\" (below) is under {FLAT:+.2f}. Solved cells: {len(solved)}; "
+              f"when its \"last change\" (below) is under {FLAT:+.2f} or its last point (mean over seeds) is above "
+              f"{1 - FLAT:.2f}, where it has no room left to rise. Solved cells: {len(solved)}; "
               f"{n_curves - len(rising)} of their {n_curves} PPO/SAC curves have flattened"
               + (", all of them." if not rising else ". Still rising: " + "; ".join(
                   f"{r['probe']} {r['table']} {r['agent']} {r['curve_last_change']:+.2f}" for r in rising) + ".")]
