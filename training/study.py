@@ -26,6 +26,7 @@ import yaml
 
 from training.policies import REFERENCE_AGENTS
 from training.runner import ALGOS
+from training.study_report import PROBES, split_cell
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = ROOT / "configs" / "study" / "default.yaml"
@@ -34,7 +35,6 @@ AGENTS = ALGOS + REFERENCE_AGENTS
 KEYS = {"cells", "agents", "seeds", "eval_episodes", "curve_points", "curve_episodes", "timesteps",
         "num_envs", "hyperparameters"}
 OPTIONAL_KEYS = {"timesteps_per_probe"}  # {probe: {algo: steps}}: a longer budget where a probe learns slower
-PROBES = ("Steer", "Drive", "Both")
 
 
 def probe_cells() -> list[str]:
@@ -121,7 +121,6 @@ def _check_per_probe(path, per_probe) -> dict:
 
 def timesteps_of(cfg, cell: str, algo: str) -> int:
     """The training budget of one cell: the probe's own (timesteps_per_probe) if it has one, else timesteps."""
-    from training.study_report import split_cell
     per_probe = cfg.get("timesteps_per_probe") or {}
     return per_probe.get(split_cell(cell)[0], {}).get(algo, cfg["timesteps"][algo])
 
