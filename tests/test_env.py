@@ -116,6 +116,7 @@ def test_open_plane_never_searches(monkeypatch):
     calls = []
     record = lambda *a, **k: calls.append(1)  # noqa: E731
     monkeypatch.setattr(functional, "certified_free_trig", record)
+    monkeypatch.setattr(functional, "advance_m", record)
     monkeypatch.setattr(functional, "advance_through_m", record)
     env = gym.make("PennyReach-Plane-v0", backend="python")
     env.reset(seed=0)

@@ -70,7 +70,8 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
 
 def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
     # physics.scalar.advance_m may stop after a bounded amount of work (elapsed < the time asked);
-    # the step (through scalar.advance_through_m) calls it again until the period is done: the same motion and impacts
+    # the step then runs the period through scalar.advance_through_m, which calls it again until the
+    # period is done: the same motion and impacts
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
     rng = np.random.default_rng(3)
     calls = []
@@ -88,6 +89,7 @@ def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
         times0, ends0 = times0[1], ends0[1]
         with monkeypatch.context() as mp:
             mp.setattr(scalar, "advance_m", one_impact_per_call)  # the step resumes it (scalar.advance_through_m)
+            mp.setattr(functional, "advance_m", one_impact_per_call)
             times1, ends1 = np.zeros((1, 200)), np.zeros((1, 200), dtype=np.int64)
             calls.clear()
             got = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0,
@@ -103,6 +105,32 @@ def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
 
 # -- compiled and plain-Python steps agree (moved here from tests/test_compiled.py) -----------------
 @needs_numba
+@needs_numba
+def test_compiled_step_reruns_a_capped_period_as_the_plain_step_does():
+    # an event loop stopped by its per-call cap (m.max_events impacts) is rerun by advance_through_m, in
+    # the compiled step as in the plain one: the same numbers, and the impacts of one uncapped call
+    core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
+    capped = m._replace(max_events=2)
+    fns = [functional.env_functions(b, m.kind)["env_step"] for b in ("numba", "python")]
+    rng = np.random.default_rng(5)
+    checked = 0
+    for s in _random_inside(rng, core.table, 20):
+        s = s[:4] + (30.0, s[5])
+        trig = (math.cos(s[2]), math.sin(s[2]), math.cos(s[3]), math.sin(s[3]))
+        outs = []
+        for f, model in ((fns[0], capped), (fns[1], capped), (fns[1], m)):
+            obs, times, ends = np.zeros((1, 11), np.float32), np.full((1, 64), np.nan), np.zeros((1, 64), np.int64)
+            out = f(s, trig, 0.2, 0.9, 0.01, 0.0, 1.0, 0.0, 0, 0.05, 0, functional.pack(p, model, core.k), obs, times, ends)
+            outs.append((out, obs, times, ends))
+        (a, obs_a, t_a, e_a), (b, obs_b, t_b, e_b), (free, _, t_f, _) = outs
+        assert np.array_equal(_bits(a[0]), _bits(b[0])) and a[1:] == b[1:]
+        assert np.array_equal(obs_a, obs_b) and np.array_equal(_bits(t_a), _bits(t_b)) and np.array_equal(e_a, e_b)
+        n = free[2]
+        assert n > 2 and b[2] == n and np.allclose(t_b[0, :n], t_f[0, :n], rtol=0, atol=1e-12)
+        checked += 1
+    assert checked == 20
+
+
 def test_backend_choice_and_errors():
     v = PennyVectorEnv(3, backend="auto")
     assert v._core.backend == "numba" and PennyEnv()._core.backend == "numba"

@@ -100,10 +100,11 @@ def test_batch_and_env_paths_resume_after_the_cap(backend):
         assert np.array_equal(tr.impact_times, res.times_of(0)) and np.array_equal(tr.final_state, res.final_states[0])
     # the single penny's loop, plain or compiled (the env step resumes the same way: tests/test_env_step.py)
     advance = advance_through_m
+    model = scalar_model(PARAMS, table, ELASTIC, settings)
     if backend == "numba":
         from penny_env.physics.compiled import compiled_functions
-        advance = compiled_functions()["advance_through_m"]
-    s, impacts, rests, _ = advance(tuple(s0), 0.0, 0.0, 5.0, scalar_model(PARAMS, table, ELASTIC, settings))
+        advance = compiled_functions(model.kind)["advance_through_m"]
+    s, impacts, rests, _ = advance(tuple(s0), 0.0, 0.0, 5.0, model)
     assert len(impacts) > 2 and not rests
     assert energy(s)[0] == pytest.approx(energy(s0)[0], rel=1e-13)
 

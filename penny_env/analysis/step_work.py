@@ -58,9 +58,9 @@ def counters(n, steps):
 
 
 def heavy_pennies(n, steps):
-    fn = functional.compiled_env_functions()["env_step"]
     for env_id in PRESETS:
         venv = gym.make_vec(env_id, num_envs=n).unwrapped
+        fn = functional.compiled_env_functions(venv._m.kind)["env_step"]
         venv.reset(seed=0)
         venv.action_space.seed(0)
         obs = np.empty((1, venv._core.obs_dim), np.float32)

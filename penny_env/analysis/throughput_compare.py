@@ -3,12 +3,18 @@
     python -m penny_env.analysis.throughput_compare --before OLD_TREE --after NEW_TREE [--rounds 3] [--out FILE]
 
 Each tree is measured in its own subprocess (``PYTHONPATH=TREE``, so each imports its own penny_env) and the
-two alternate, round after round, so that both see the same load of a shared machine; every rate is the best
-of the rounds (timeit's convention). ``--clock cpu`` times CPU time instead of wall-clock time. Measured for every env id the two trees share: the single env through
+two alternate, round after round, so that both see the same load of a shared machine. ``--clock cpu`` times
+CPU time instead of wall-clock time. Measured for every env id the two trees share: the single env through
 ``gymnasium.make`` (us per step, random actions, resets included) and the native vector env
-(``gymnasium.make_vec``, its default backend) at N = 1, 16, 256, 4096 (env-steps per second). The report
-gives after / before speed ratios (above 1: faster) and lists every measurement that lost more than
-``--tolerance`` (default 5%).
+(``gymnasium.make_vec``, its default backend) at N = 1, 16, 256, 4096 (env-steps per second).
+
+Within a process a measurement depends on what ran before it (the heap, the garbage collector's
+generations, numba's loaded code): the same code measured after other ids can differ by 15%. So each round
+runs the measurements in its own shuffled order, the same for both trees, and a history effect becomes
+round-to-round noise instead of a bias of one tree. The report gives two after / before speed ratios (above
+1: faster): the ratio of the best rates of all rounds (timeit's convention) and the median over rounds of
+the ratio within a round (the two trees measured back to back, in the same order); it lists every
+measurement whose ratio of either kind shows a loss of more than ``--tolerance`` (default 5%).
 
 ``--quick`` (tests): one round, two ids, N <= 16, few steps, and the report goes to a temporary directory
 unless ``--out`` is given.
@@ -20,7 +26,9 @@ import datetime as _dt
 import json
 import os
 import platform
+import random
 import shlex
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -39,8 +47,9 @@ def _worker(args) -> dict:
 
     clock = time.process_time if args.clock == "cpu" else time.perf_counter
     ids = [i for i in (args.ids or env_ids())]
+    order = random.Random(args.order_seed)  # this round's order (module docstring)
     out = {"penny_env": os.path.dirname(penny_env.__file__), "single": {}, "vector": {}}
-    for env_id in ids:
+    for env_id in order.sample(ids, len(ids)):
         env = gym.make(env_id)
         env.reset(seed=0)
         env.action_space.seed(0)
@@ -54,27 +63,26 @@ def _worker(args) -> dict:
                 env.reset()
         out["single"][env_id] = (clock() - t0) / len(acts) * 1e6
         env.close()
-    for env_id in ids:
-        for n in args.sizes:
-            steps = max(3, min(1000, args.vector_budget // n))
-            venv = gym.make_vec(env_id, num_envs=n)
-            venv.reset(seed=0)
-            venv.action_space.seed(0)
-            acts = [venv.action_space.sample() for _ in range(steps)]
-            for a in acts[:3]:
-                venv.step(a)
-            t0 = clock()
-            for a in acts:
-                venv.step(a)
-            out["vector"][f"{env_id}|{n}"] = n * steps / (clock() - t0)
-            venv.close()
+    for env_id, n in order.sample([(i, n) for i in ids for n in args.sizes], len(ids) * len(args.sizes)):
+        steps = max(3, min(4000, args.vector_budget // n))
+        venv = gym.make_vec(env_id, num_envs=n)
+        venv.reset(seed=0)
+        venv.action_space.seed(0)
+        acts = [venv.action_space.sample() for _ in range(steps)]
+        for a in acts[:3]:
+            venv.step(a)
+        t0 = clock()
+        for a in acts:
+            venv.step(a)
+        out["vector"][f"{env_id}|{n}"] = n * steps / (clock() - t0)
+        venv.close()
     np.asarray(0)  # numpy imported for gymnasium's spaces either way
     return out
 
 
-def _measure(tree: str, args) -> dict:
+def _measure(tree: str, args, order_seed: int) -> dict:
     env = dict(os.environ, PYTHONPATH=os.path.abspath(tree), PYTHONDONTWRITEBYTECODE="1")
-    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--clock", args.clock,
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--clock", args.clock, "--order-seed", str(order_seed),
            "--single-steps", str(args.single_steps),
            "--vector-budget", str(args.vector_budget), "--sizes", *map(str, args.sizes)]
     if args.ids:
@@ -88,11 +96,29 @@ def _measure(tree: str, args) -> dict:
     return data
 
 
-def _best(runs: list[dict], kind: str, better) -> dict:
-    keys = set(runs[0][kind])
-    for r in runs[1:]:
+def _keys(runs: dict, kind: str) -> list:
+    """The measurements of this kind that every run of both trees has."""
+    keys = set(runs["before"][0][kind])
+    for r in runs["before"] + runs["after"]:
         keys &= set(r[kind])
-    return {k: better(r[kind][k] for r in runs) for k in keys}
+    return sorted(keys, key=lambda k: (k.split("|")[0], int(k.split("|")[1]) if "|" in k else 0))
+
+
+def speed_ratios(runs: dict, kind: str) -> dict:
+    """key -> (best before, best after, ratio of the bests, median of the per-round ratios) for
+    kind "single" (us per step: lower is faster) or "vector" (env-steps per second); ratios are
+    speed after / before."""
+    faster = min if kind == "single" else max
+
+    def speed(before, after):
+        return before / after if kind == "single" else after / before
+
+    out = {}
+    for k in _keys(runs, kind):
+        b = [r[kind][k] for r in runs["before"]]
+        a = [r[kind][k] for r in runs["after"]]
+        out[k] = (faster(b), faster(a), speed(faster(b), faster(a)), statistics.median(map(speed, b, a)))
+    return out
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -108,10 +134,11 @@ def main(argv: list[str] | None = None) -> str:
                     help="wall: time.perf_counter; cpu: time.process_time (all of the process's threads: steadier on a "
                          "machine loaded by other work, but it counts the threads' CPU time, not the elapsed time)")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--order-seed", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--ids", nargs="*", default=None, help="env ids (default: every id both trees register)")
     ap.add_argument("--sizes", nargs="*", type=int, default=None)
     ap.add_argument("--single-steps", type=int, default=None)
-    ap.add_argument("--vector-budget", type=int, default=None, help="env-steps per vector measurement")
+    ap.add_argument("--vector-budget", type=int, default=None, help="env-steps per vector measurement (3 to 4000 steps of the vector env)")
     args = ap.parse_args(argv)
     if args.quick:
         args.rounds, args.ids = 1, args.ids or list(QUICK_IDS)
@@ -132,41 +159,41 @@ def main(argv: list[str] | None = None) -> str:
     runs = {"before": [], "after": []}
     for r in range(args.rounds):
         for name in ("before", "after"):
-            runs[name].append(_measure(getattr(args, name), args))
+            runs[name].append(_measure(getattr(args, name), args, order_seed=r))
             print(f"round {r + 1}/{args.rounds}: {name} measured", flush=True)
-    single = {k: _best(v, "single", min) for k, v in runs.items()}
-    vector = {k: _best(v, "vector", max) for k, v in runs.items()}
-    rows_s = sorted(set(single["before"]) & set(single["after"]))
-    rows_v = sorted(set(vector["before"]) & set(vector["after"]), key=lambda k: (k.split("|")[0], int(k.split("|")[1])))
+    single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
     cmd = "python -m penny_env.analysis.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
              f"- command: `{cmd}`",
-             f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), best of each; "
-             f"clock: {'CPU time (time.process_time)' if args.clock == 'cpu' else 'wall clock'}",
+             f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), each in its own "
+             f"shuffled order (the same for both trees); clock: "
+             f"{'CPU time (time.process_time)' if args.clock == 'cpu' else 'wall clock'}",
+             "- speed after / before, above 1: faster. *best*: the ratio of the best of all rounds; *median*: the median "
+             "over rounds of the ratio within a round",
              "", "## Single environment (us per step, gymnasium.make)", "",
-             "| env | before | after | speed after / before |", "| --- | ---: | ---: | ---: |"]
+             "| env | before | after | speed after / before (best) | (median) |", "| --- | ---: | ---: | ---: | ---: |"]
     losses = []
-    for k in rows_s:
-        b, a = single["before"][k], single["after"][k]
-        lines.append(f"| {k} | {b:.2f} | {a:.2f} | {b / a:.3f} |")
-        if b / a < 1 - args.tolerance:
-            losses.append(f"single {k}: {b / a:.3f}")
+    limit = 1 - args.tolerance
+    for k, (b, a, best, med) in single.items():
+        lines.append(f"| {k} | {b:.2f} | {a:.2f} | {best:.3f} | {med:.3f} |")
+        if min(best, med) < limit:
+            losses.append(f"single {k}: best {best:.3f}, median {med:.3f}")
     lines += ["", "## Vector environment (env-steps per second, gymnasium.make_vec)", "",
-              "| env | N | before | after | speed after / before |", "| --- | ---: | ---: | ---: | ---: |"]
-    for k in rows_v:
+              "| env | N | before | after | speed after / before (best) | (median) |",
+              "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for k, (b, a, best, med) in vector.items():
         env_id, n = k.split("|")
-        b, a = vector["before"][k], vector["after"][k]
-        lines.append(f"| {env_id} | {n} | {b:,.0f} | {a:,.0f} | {a / b:.3f} |")
-        if a / b < 1 - args.tolerance:
-            losses.append(f"vector {env_id} N={n}: {a / b:.3f}")
-    ratios = [single["before"][k] / single["after"][k] for k in rows_s] + \
-             [vector["after"][k] / vector["before"][k] for k in rows_v]
+        lines.append(f"| {env_id} | {n} | {b:,.0f} | {a:,.0f} | {best:.3f} | {med:.3f} |")
+        if min(best, med) < limit:
+            losses.append(f"vector {env_id} N={n}: best {best:.3f}, median {med:.3f}")
+    rows = list(single.values()) + list(vector.values())
     lines += ["", "## Summary", "",
-              f"- {len(ratios)} measurements; speed ratio after / before: min {min(ratios):.3f}, "
-              f"max {max(ratios):.3f}",
-              f"- losses beyond {args.tolerance:.0%}: " + ("none" if not losses else "; ".join(losses))]
+              f"- {len(rows)} measurements; speed ratio after / before, best of rounds: min "
+              f"{min(r[2] for r in rows):.3f}, max {max(r[2] for r in rows):.3f}; median of rounds: min "
+              f"{min(r[3] for r in rows):.3f}, max {max(r[3] for r in rows):.3f}",
+              f"- losses beyond {args.tolerance:.0%} (by either ratio): " + ("none" if not losses else "; ".join(losses))]
     report = "\n".join(lines) + "\n"
     out = args.out or os.path.join(tempfile.mkdtemp(prefix="penny_throughput_compare_"), "throughput_compare.md")
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)

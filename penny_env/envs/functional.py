@@ -28,13 +28,13 @@ from typing import NamedTuple
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import Model, advance_through_m, certified_free_trig, flow1
+from ..physics.scalar import Model, advance_m, advance_through_m, certified_free_trig, flow1
 from .tasks import TaskConstants, on_arc, step_reward
 
 XP = SCALAR      # the math namespace of tasks.py's formulas (numba_math in the compiled copies)
 prange = range   # numba.prange in the compiled copies
 
-_COMPILED = None
+_COMPILED: dict = {}  # physics/compiled.py's variant_key(kind) -> compiled entry points
 
 
 class EnvParams(NamedTuple):
@@ -129,12 +129,17 @@ def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends, ro
     times.shape[1] impacts go into row `row` of times and ends; the counts are exact.
 
     A period the certificate (scalar.certified_free_trig) shows free of impacts is one flow. Any
-    other goes through the physics' event loop over the whole period (scalar.advance_through_m: it
-    resumes the calls that the per-call event cap stopped early, so the motion is that of one
-    uninterrupted call)."""
+    other goes through the physics' event loop (scalar.advance_m). Where its per-call event cap
+    stopped it early (m.max_events impacts: an accumulation, rare), the period is run again by
+    scalar.advance_through_m, which resumes the capped calls, so the motion is that of one
+    uninterrupted call (its first call is the same advance_m: the same numbers, bitwise). Calling
+    advance_m directly keeps the resumption loop off the common path (about 1 % of the vector step)."""
     if p.plane or certified_free_trig(s, c_ph, s_ph, acc1, acc2, p.dt, m):
         return flow1(s, acc1, acc2, p.dt, m.R), 0, 0
-    s, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, m)
+    s1, impacts, _, elapsed = advance_m(s, acc1, acc2, p.dt, m, 0)
+    if elapsed < p.dt:
+        s1, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, m)
+    s = s1
     n_arc = 0
     cap = times.shape[1]
     for j in range(len(impacts)):
@@ -265,51 +270,63 @@ PYTHON_FUNCTIONS = {"env_step": env_step_packed, "step_envs": step_envs_packed, 
                     "initial_observation": initial_observation_packed}
 
 
-def compiled_env_functions() -> dict:
-    """PYTHON_FUNCTIONS compiled with numba (once per process; machine code cached on disk).
+def compiled_env_functions(kind: int) -> dict:
+    """PYTHON_FUNCTIONS compiled with numba for the scenes whose Model.kind is ``kind`` (the open
+    plane: scalar.OTHER), once per process for each kind and registry state (see
+    physics/compiled.py's compiled_functions, whose physics they call); the machine code is cached
+    on disk where compiled.cacheable(kind).
 
     The functions above are compiled as copies whose globals hold the compiled physics and task
     functions (closures over compiled functions would miss numba's on-disk cache in every new
     process); see physics/compiled.py."""
-    global _COMPILED
-    if _COMPILED is not None:
-        return _COMPILED
+    from ..physics import compiled
+
+    kind = compiled.check_kind(kind)
+    key = compiled.variant_key(kind)
+    if key in _COMPILED:
+        return _COMPILED[key]
     import numba
 
-    from ..physics import compiled, numba_math
+    from ..physics import numba_math
     from . import functional, tasks
 
-    phys = compiled.compiled_functions()
-    compiled.drop_stale_cache(Path(__file__).with_name("__pycache__"),
-                              compiled.physics_modules() + (tasks, functional))
-    jit = numba.njit(cache=True)
+    phys = compiled.compiled_functions(kind)
+    own = compiled.cacheable(kind)
+    if own:
+        compiled.drop_stale_cache(Path(__file__).with_name("__pycache__"),
+                                  compiled.physics_modules() + (tasks, functional))
+    variant = compiled.variant_name(kind)
+    jit = numba.njit(cache=own)
+    # inlined: a call that passes arrays increments and decrements their reference counts, atomically
+    inline = numba.njit(cache=own, inline="always")
+
+    def copy(f, compiler=jit):
+        return compiled.jit_copy(f, namespace, compiler, variant)
+
     namespace = dict(vars(tasks))  # the task formulas' constants (REACH, PARK, IMPACTS)
     namespace.update(vars(functional), __builtins__=builtins, XP=numba_math, prange=numba.prange)
-    for name in ("certified_free_trig", "flow1", "advance_through_m"):
+    for name in ("certified_free_trig", "flow1", "advance_m", "advance_through_m"):
         namespace[name] = phys[name]
-    for f in (tasks.on_arc, tasks.step_reward):
-        namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    for f in (clip_action, observe, angle_trig, kinetic_energy):
-        namespace[f.__name__] = compiled.jit_copy(f, namespace, jit)
-    # inlined: a call that passes arrays increments and decrements their reference counts, atomically
-    inline = numba.njit(cache=True, inline="always")
+    for f in (tasks.on_arc, tasks.step_reward, clip_action, observe, angle_trig, kinetic_energy):
+        namespace[f.__name__] = copy(f)
     for f in (write_row, transition):
-        namespace[f.__name__] = compiled.jit_copy(f, namespace, inline)
-    namespace["observe_rows"] = compiled.jit_copy(observe_rows, namespace, jit)
-    namespace["initial_observation"] = compiled.jit_copy(initial_observation, namespace, jit)
-    namespace["env_step"] = compiled.jit_copy(env_step, namespace, jit)
-    single = compiled.jit_copy(env_step_packed, namespace, jit)
+        namespace[f.__name__] = copy(f, inline)
+    namespace["observe_rows"] = copy(observe_rows)
+    namespace["initial_observation"] = copy(initial_observation)
+    namespace["env_step"] = copy(env_step)
+    single = copy(env_step_packed)
     # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
-    namespace["env_step"] = compiled.jit_copy(env_step, namespace, numba.njit(cache=True, inline="always"))
-    namespace["step_envs"] = compiled.jit_copy(step_envs, namespace, numba.njit(parallel=True, cache=True))
-    _COMPILED = {"env_step": single,
-                 "step_envs": compiled.jit_copy(step_envs_packed, namespace, jit),
-                 "observe_rows": compiled.jit_copy(observe_rows_packed, namespace, jit),
-                 "initial_observation": compiled.jit_copy(initial_observation_packed, namespace, jit)}
-    return _COMPILED
+    namespace["env_step"] = copy(env_step, inline)
+    namespace["step_envs"] = copy(step_envs, numba.njit(parallel=True, cache=own))
+    _COMPILED[key] = {"env_step": single,
+                      "step_envs": copy(step_envs_packed),
+                      "observe_rows": copy(observe_rows_packed),
+                      "initial_observation": copy(initial_observation_packed)}
+    return _COMPILED[key]
 
 
-def env_functions(backend: str) -> dict:
+def env_functions(backend: str, kind: int = -1) -> dict:
     """The entry points of a backend ("env_step", "step_envs", "observe_rows", "initial_observation",
-    taking consts = pack(p, m, k)): "numba" (compiled) or "python" (these functions as they are)."""
-    return compiled_env_functions() if backend == "numba" else PYTHON_FUNCTIONS
+    taking consts = pack(p, m, k)): "numba" (compiled for Model.kind ``kind``, m.kind of the consts
+    they will receive) or "python" (these functions as they are)."""
+    return compiled_env_functions(kind) if backend == "numba" else PYTHON_FUNCTIONS

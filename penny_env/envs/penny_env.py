@@ -155,10 +155,10 @@ class PennyEnv(gym.Env):
 
     def _make_core(self):
         core = self._core = Core(self.scene, self.task, backend=self.backend)
-        self._fns = env_functions(core.backend)
         # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes)
         self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
+        self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
         self._times = np.empty((1, IMPACTS_BUFFER))
         self._ends = np.empty((1, IMPACTS_BUFFER), dtype=np.int64)

@@ -134,9 +134,9 @@ class PennyVectorEnv(VectorEnv):
 
     def _make_core(self):
         core = self._core = Core(self.scene, self.task, backend=self.backend)
-        self._fns = env_functions(core.backend)
         self._p = env_params(core)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
+        self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
         if core.backend == "numba":
             self._warm_up()
