@@ -1,12 +1,15 @@
 """Work per env-step by preset (issue 10.6: why PennyPark-Stadium-v0 at N = 4096 ran slower).
 
-    python -m penny_env.analysis.step_work [--n 256] [--steps 292]
+    python -m penny_env.analysis.step_work [--n 256] [--steps 292] [--quick]
 
 1. Counters (the plain-Python step, instrumented): event-loop calls, impact searches, search
    iterations, curvature steps and impacts per env-step, random actions, NEXT_STEP autoreset.
-2. The costliest pennies: every penny whose step had more than 8 impacts (what 960f394's vector
-   step reran alone, serially, to fill its impact buffer) is stepped again alone with the compiled
-   env_step (best of 3), at N = 4096."""
+2. Every penny's step, run again alone with the compiled env_step (at N = 4096): the median, the
+   99.99th percentile and the largest cost of one penny's step (a penny stuck in a slow search
+   would stand out), and the pennies with more than 8 impacts in a step (what 960f394's vector step
+   reran alone, serially, to fill its impact buffer).
+3. Resets (at N = 4096): envs reset per step and the time the vector env spends resetting them,
+   against the whole step."""
 from __future__ import annotations
 
 import argparse
@@ -57,7 +60,7 @@ def counters(n, steps):
             setattr(mod, name, f)
 
 
-def heavy_pennies(n, steps):
+def penny_costs(n, steps):
     for env_id in PRESETS:
         venv = gym.make_vec(env_id, num_envs=n).unwrapped
         fn = functional.compiled_env_functions(venv._m.kind)["env_step"]
@@ -65,32 +68,63 @@ def heavy_pennies(n, steps):
         venv.action_space.seed(0)
         obs = np.empty((1, venv._core.obs_dim), np.float32)
         times, ends = np.empty((1, 64)), np.empty((1, 64), np.int64)
-        costs, step_times = [], []
-        for _ in range(steps):
+        costs, heavy = [], []
+        for t in range(steps):
             a = venv.action_space.sample()
             S, trig, cnt, d, st = venv._S.copy(), venv._trig.copy(), venv._count.copy(), venv._d.copy(), venv._steps.copy()
-            t0 = time.perf_counter()
-            info = venv.step(a)[4]
-            step_times.append(time.perf_counter() - t0)
-            for i in np.flatnonzero(info["impacts"] > 8):
-                args = (tuple(S[:, i]), tuple(trig[:, i]), float(a[i, 0]), float(a[i, 1]), venv._target[0, i],
+            for i in np.flatnonzero(~venv._autoreset):  # (the envs that reset at this step take no step)
+                args = (tuple(S[:, i]), tuple(trig[:, i]), float(a[i, 0]), float(a[i, -1]), venv._target[0, i],
                         venv._target[1, i], venv._arc[0, i], venv._arc[1, i], int(cnt[i]), d[i], int(st[i]), venv._consts,
                         obs, times, ends)
-                best = np.inf
-                for _ in range(3):
-                    t0 = time.perf_counter()
-                    fn(*args)
-                    best = min(best, time.perf_counter() - t0)
-                costs.append(best * 1e6)
-        c = np.array(costs) if costs else np.zeros(1)
-        print(f"{env_id:26s} N={n}: median step {np.median(step_times) * 1e6:.0f} us; pennies with > 8 impacts: "
-              f"{len(costs)} in {steps} steps, each {np.median(c):.0f} us (median), {c.max():.0f} us (max)", flush=True)
+                if t == 0 and not costs:
+                    fn(*args)  # the first call checks the argument types: not a penny's cost
+                t0 = time.perf_counter()
+                impacts = fn(*args)[2]
+                costs.append(time.perf_counter() - t0)
+                if impacts > 8:
+                    heavy.append(costs[-1])
+            venv.step(a)
+        c = np.array(costs) * 1e6
+        h = np.array(heavy or [0.0]) * 1e6
+        print(f"{env_id:26s} N={n}: one penny's step {np.median(c):.1f} us (median), {np.percentile(c, 99.99):.0f} us "
+              f"(99.99th percentile), {c.max():.0f} us (max); pennies with > 8 impacts: {len(heavy)} in {steps} steps, "
+              f"{np.median(h):.0f} us (median), {h.max():.0f} us (max)", flush=True)
+
+
+def reset_costs(n, steps):
+    for env_id in PRESETS:
+        venv = gym.make_vec(env_id, num_envs=n)
+        env = venv.unwrapped
+        spent = {"time": 0.0, "envs": 0}
+        reset_envs = env._reset_envs
+
+        def timed(mask, *args):
+            t0 = time.perf_counter()
+            out = reset_envs(mask, *args)
+            spent["time"] += time.perf_counter() - t0
+            spent["envs"] += int(np.count_nonzero(mask))
+            return out
+        env._reset_envs = timed
+        venv.reset(seed=0)
+        venv.action_space.seed(0)
+        acts = [venv.action_space.sample() for _ in range(steps)]
+        spent.update(time=0.0, envs=0)
+        t0 = time.perf_counter()
+        for a in acts:
+            venv.step(a)
+        total = time.perf_counter() - t0
+        print(f"{env_id:26s} N={n}: step {total / steps * 1e6:.0f} us; resets {spent['envs'] / steps:.1f} envs per step, "
+              f"{spent['time'] / steps * 1e6:.1f} us per step ({spent['time'] / total:.1%})", flush=True)
 
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=256, help="envs for the counters (plain Python: keep it small)")
     ap.add_argument("--steps", type=int, default=292)
+    ap.add_argument("--quick", action="store_true", help="16 envs, 5 steps (tests)")
     args = ap.parse_args()
-    counters(args.n, args.steps)
-    heavy_pennies(4096, args.steps)
+    n_big = 16 if args.quick else 4096
+    steps = 5 if args.quick else args.steps
+    counters(16 if args.quick else args.n, steps)
+    penny_costs(n_big, steps)
+    reset_costs(n_big, steps)
