@@ -237,6 +237,7 @@ def compiled_functions(kind: int) -> dict:
         modules = physics_modules()
         drop_stale_cache(cache, modules)
         drop_stale_cache(cache / "__pycache__", modules)  # the generated law dispatch's machine code
+        drop_stale_cache(Path(__file__).parent / "tables" / "__pycache__", modules)  # the formulas' copies
 
     jit = numba.njit(cache=own)
 
