@@ -210,12 +210,6 @@ class Scene:
         """Indices of the actuated controls among (u1, u2)."""
         return ACTUATIONS[self.actuation]
 
-    @property
-    def has_walls(self) -> bool:
-        if not isinstance(self.table, dict):
-            return True
-        return self.table.get("kind", "none") not in ("none", "plane", None)
-
     def spawn_axes(self) -> tuple[float, float]:
         """Semi-axes of the spawn ellipse E (inside the table, containing the inscribed disk: the
         table's own spawn_axes), or the arena on the open plane."""

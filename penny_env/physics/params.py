@@ -90,5 +90,4 @@ class SolverSettings:
             object.__setattr__(self, name, int(v))
 
 
-DEFAULT_PARAMS = PennyParams()
 DEFAULT_SETTINGS = SolverSettings()
