@@ -325,8 +325,9 @@ def compiled_env_functions(kind: int) -> dict:
     return _COMPILED[key]
 
 
-def env_functions(backend: str, kind: int = -1) -> dict:
+def env_functions(backend: str, kind: int) -> dict:
     """The entry points of a backend ("env_step", "step_envs", "observe_rows", "initial_observation",
-    taking consts = pack(p, m, k)): "numba" (compiled for Model.kind ``kind``, m.kind of the consts
-    they will receive) or "python" (these functions as they are)."""
+    taking consts = pack(p, m, k)): "numba" (compiled for Model.kind ``kind``: it must be m.kind of
+    the consts they will receive, as the compiled physics calls that table's formulas whatever m
+    says) or "python" (these functions as they are, for any kind)."""
     return compiled_env_functions(kind) if backend == "numba" else PYTHON_FUNCTIONS
