@@ -14,6 +14,7 @@ Modules (each report is a command, ``python -m penny_env.analysis.<name> --help`
 * :mod:`penny_env.analysis.paper_figures` - the paper's figures;
 * :mod:`penny_env.analysis.dynamics`   - reachable sets and Lyapunov exponents of batches of pennies;
 * :mod:`penny_env.analysis.controllability` - does controllability of the penny need impacts? (sampled reachable sets).
+* :mod:`penny_env.analysis.impact_geometry` - the impact laws in scaled speeds and the formulas of docs/controllability_theory.md.
 
 scipy, matplotlib and tqdm are imported only inside these modules (never at ``import penny_env``).
 """

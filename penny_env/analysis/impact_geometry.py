@@ -21,7 +21,8 @@ import math
 
 import numpy as np
 
-from ..physics.flows import PHI, PHI_DOT, THETA_DOT, X, Y
+from ..physics.flows import PHI, X, Y
+from ..physics.laws import make_law
 
 
 def scaled_speeds(theta_dot, phi_dot, params):
@@ -87,11 +88,14 @@ def stopping_angle(law, params) -> float:
     """The incidence beta at which an impact of a penny that does not spin (phi_dot = 0) leaves theta_dot = 0
     (T2.4): tan^2 beta = e J / (I + m R^2) for a restitution e ("elastic": e = 1, :func:`full_conversion_angle`);
     for "plastic" the root of tan^2 beta = e(beta) J / (I + m R^2) (sin beta = 1/4 for the thin uniform penny)."""
+    parsed = make_law(law)  # a clear TypeError / ValueError naming the law for anything else
     ratio = params.J / params.rolling_inertia
-    if law == "elastic":
+    if parsed.kind == "elastic":
         return full_conversion_angle(params)
-    if law != "plastic":
-        return math.atan(math.sqrt(float(law) * ratio))
+    if parsed.kind == "restitution":
+        return math.atan(math.sqrt(parsed.e * ratio))
+    if parsed.kind != "plastic":
+        raise ValueError(f"stopping_angle: law must be 'elastic', 'plastic' or a restitution e in [0, 1], got {law!r}")
     lo, hi = 0.0, 0.5 * math.pi  # tan^2 - e(beta) ratio rises from -e(0) ratio <= 0 to +inf
     for _ in range(200):
         mid = 0.5 * (lo + hi)
@@ -123,6 +127,10 @@ def wall_crossing(table, x, y, dx, dy):
     """The point where the ray (x, y) + t (dx, dy), t > 0, from a point inside the table meets the
     wall (h = 0), by bisection to round-off (the table is convex, so h changes sign once)."""
     d = math.hypot(dx, dy)
+    if not (math.isfinite(d) and d > 0.0):
+        raise ValueError(f"wall_crossing: the direction (dx, dy) must be finite and nonzero, got {(dx, dy)!r}")
+    if not float(table.h(x, y)) < 0.0:
+        raise ValueError(f"wall_crossing: the point (x, y) = {(x, y)!r} must lie inside the table")
     dx, dy = dx / d, dy / d
     lo, hi = 0.0, 1.0
     span = max(abs(v) for v in table.extent)
