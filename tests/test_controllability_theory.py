@@ -15,6 +15,7 @@ import pytest
 import penny_env  # noqa: F401  (registers the ids)
 from penny_env import Circle, Ellipse, PennyParams, RoundedRectangle, Stadium, impact_map, simulate
 from penny_env import batch
+from penny_env.physics import flow
 from penny_env.analysis import impact_geometry as ig
 
 P = PennyParams()  # the paper's US penny: I = m R^2 / 2, J = m R^2 / 4
@@ -252,6 +253,52 @@ def test_t2_stopping_angle(name, law):
                         np.testing.assert_allclose(P.J * post[:, 5] ** 2, P.rolling_inertia * S[:, 4] ** 2, rtol=1e-12)
                 else:
                     assert np.all(ratio > 0.01)
+
+
+@pytest.mark.parametrize("law", LAWS, ids=str)
+@pytest.mark.parametrize("beta", [0.3, 0.5])
+def test_t2_stopping_impact_then_braking_parks_at_the_wall(law, beta):
+    """T2.4 with its braking proposition, as a run of the simulator and an episode of the steer-only probe: a penny
+    rolling at 2 rad/s into the stadium's flat side at incidence beta, with the rest-making spin, comes out of its only
+    impact with theta_dot = 0 (to round-off) and its contact point within R of the wall; steering alone then brakes
+    the spin within the free angle pi - 2 beta, and it is at rest there (no second impact; with e = 0 the end stays
+    pressed on the wall: later touches at round-off speeds change nothing). Through PennyProbeSteer-Stadium-* with that start and the
+    target at the rest point, the same actions end the episode with is_success."""
+    table = TABLES["stadium"]
+    phi = math.pi / 2 - beta  # the front end meets the flat side y = radius = 0.1 at (0.02, 0.1)
+    S = np.array([0.02 - P.R * math.cos(phi), 0.1 - P.R * math.sin(phi), 0.0, phi, 2.0, 0.0])
+    u, _ = ig.scaled_speeds(S[4], 0.0, P)
+    cb, sb, _ = ig.incidence(S, 1, P, table)
+    S[5] = ig.unscaled_speeds(0.0, ig.rest_making_spin(u, *ig.impact_normal(S, 1, P, table),
+                                                        float(law_e(law, np.arctan2(sb, cb)))), P)[1]
+    back = S.copy()
+    back[4:] *= -1  # the free flow is reversible: the state 0.2 s before the impact
+    start = flow(back[:, None], 0.0, 0.0, 0.2, P.R)[:, 0]
+    start[4:] *= -1
+    spin = impact_map(S, table=table, end=1, law=law)[5]
+    dt, n_free = 0.05, 5
+    n_brake = max(1, math.ceil(abs(spin) / (10.0 * dt)))  # steps at (nearly) full steering torque, 10 rad/s^2
+    a1 = -spin * P.J / (n_brake * dt) / U1  # the action that removes the spin in n_brake steps (|a1| <= 1)
+    assert abs(a1) <= 1.0
+    assert abs(spin) * n_brake * dt / 2 < math.pi - 2 * beta  # the proposition's hypothesis: the heading turns less
+    actions = [0.0] * n_free + [a1] * n_brake
+    traj = simulate(start, table=table, law=law, controls=[[a * U1, 0.0] for a in actions], control_dt=dt)
+    assert traj.impact_times[0] == pytest.approx(0.2, abs=1e-12)
+    later = traj.impact_states[1:]  # only the e = 0 penny, pressed on the wall, touches it again
+    assert law == 0.0 or len(later) == 0
+    assert np.all(np.abs(later[:, 4]) < 1e-12) and np.all(np.abs(later[:, 5]) < 1e-9)
+    end = traj.final_state
+    assert abs(end[4]) < 1e-12 and abs(end[5]) < 1e-9  # at rest, to round-off
+    assert 0.1 - end[1] <= P.R  # within R of the wall (the flat side y = 0.1)
+    law_id = {"elastic": "Elastic", "plastic": "Plastic", 0.5: "E05"}.get(law, "Elastic")
+    env = gym.make(f"PennyProbeSteer-Stadium-{law_id}-v0", law=law, backend="python")
+    env.reset(seed=0, options={"state": start, "target": end[:2]})
+    for k, a in enumerate(actions):
+        _, _, term, trunc, info = env.step(np.array([a]))
+        if term or trunc:
+            break
+    assert info["is_success"] and k >= n_free - 1  # parked at the impact (0.2 s) or later
+    env.close()
 
 
 def test_t2_steer_only_never_parks_on_the_open_plane():
