@@ -415,8 +415,8 @@ FLAT_ENDED = {("stadium", math.pi / 2), ("rounded_rectangle", math.pi / 2), ("ro
 def test_t3_head_on_lines_are_unstable(name, point, heading, kick):
     """T3.5: the ellipse's axes and the stadium's and rounded rectangle's head-on lines repel. Started 1e-10 off
     the line in heading (or in position, where an end is curved), elastic walls, no torque: the spin each nearly
-    head-on impact creates turns the heading, the miss grows by a factor above 10 (about 150 to 300) per impact while
-    it is below 1 cm, and the penny is more than 1 cm off the line within 14 impacts. (A line between two parallel flat
+    head-on impact creates turns the heading, the miss grows by a factor between 100 and 400 per impact while it is
+    below 1 cm, and the penny is more than 1 cm off the line within 14 impacts. (A line between two parallel flat
     sides has parallel head-on neighbours: an offset alone is neutral there, only a heading error grows.)"""
     if kick == "offset" and (name, heading) in FLAT_ENDED:
         pytest.skip("parallel flat sides: the offset line is head-on too (neutral)")
@@ -429,7 +429,7 @@ def test_t3_head_on_lines_are_unstable(name, point, heading, kick):
     assert off_line[1] < 1e-6 and off_line.max() > 0.01
     small = off_line[1:int(np.argmax(off_line >= 1e-2))]  # from the first impact's kick until it passes 1 cm
     growth = small[1:] / small[:-1]
-    assert len(growth) >= 2 and np.all(growth > 10.0), growth
+    assert len(growth) >= 2 and np.all((growth > 100.0) & (growth < 400.0)), growth
 
 
 @pytest.mark.parametrize("kick", ["heading", "offset"])
