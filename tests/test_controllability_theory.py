@@ -549,3 +549,85 @@ def test_impact_geometry_refuses_bad_input():
     with pytest.raises(ValueError, match="direction"):
         ig.wall_crossing(TABLES["circle"], 0.0, 0.0, 0.0, 0.0)
     assert ig.stopping_angle(1.0, P) == ig.full_conversion_angle(P)
+
+
+# -- the cells the theory decides (penny_env/analysis/controllability_theorems.py) -----------------------------
+def test_theorem_cells_of_the_probes():
+    """Exactly the plane's single-input probes are impossible by theorem (steer: T2.3, drive: T3.2); the plane's
+    both-controls probe and every table cell are left to witnesses, whatever the law or table override."""
+    from penny_env.analysis.controllability_theorems import theorem_for
+    from penny_env.envs.scene import env_presets
+
+    probes = [k for k in env_presets() if k.startswith("PennyProbe")]
+    assert len(probes) == 21
+    for env_id in probes:
+        verdict = theorem_for(env_id)
+        expect = {"PennyProbeSteer-Plane-v0": "T2.3", "PennyProbeDrive-Plane-v0": "T3.2"}.get(env_id)
+        assert (verdict and verdict.id) == expect, env_id
+        if verdict:
+            assert verdict.label == f"impossible (theorem {expect})"
+            assert verdict.link().startswith("docs/controllability_theory.md#t")
+    for name, fields in TABLE_FIELDS.items():
+        for law in LAWS:
+            assert theorem_for("PennyProbeSteer-Ellipse-Elastic-v0", table=fields, law=law) is None
+            assert theorem_for("PennyProbeDrive-Ellipse-Elastic-v0", table=fields, law=law) is None
+
+
+def test_theorem_cells_follow_the_hypotheses():
+    """The theorems need their hypotheses: slow starts allowed (|R theta_dot| can start below speed_tolerance), a
+    spinning drive-only start, or targets allowed near the heading line, and the plane cell is no longer decided."""
+    from penny_env.analysis.controllability_theorems import theorem_for
+
+    assert theorem_for("PennyProbeSteer-Plane-v0", init={"theta_dot": [0.5, 5.0]}) is None
+    assert theorem_for("PennyProbeSteer-Plane-v0", init={"theta_dot": [-5.0, -1.0]}).id == "T2.3"
+    assert theorem_for("PennyProbeSteer-Plane-v0", speed_tolerance=0.04) is None
+    assert theorem_for("PennyProbeDrive-Plane-v0", init={"phi_dot": [-1.0, 1.0]}) is None
+    assert theorem_for("PennyProbeDrive-Plane-v0", heading_offset=0.01) is None
+
+
+def test_pair_theorem_on_the_envs_own_pairs():
+    """pair_theorem decides the plane probes' drawn pairs (all impossible), and leaves a drive-only pair with the
+    target on the heading line undecided, which the env then solves by rolling straight (is_success)."""
+    from penny_env.analysis.controllability_theorems import pair_theorem, resolve_id
+
+    for env_id, tid in (("PennyProbeSteer-Plane-v0", "T2.3"), ("PennyProbeDrive-Plane-v0", "T3.2")):
+        scene, task = resolve_id(env_id)
+        env = gym.make(env_id, backend="python")
+        for seed in range(20):
+            env.reset(seed=seed)
+            verdict = pair_theorem(scene, task, env.unwrapped.state, env.unwrapped.target)
+            assert verdict is not None and verdict.id == tid, (env_id, seed)
+        env.close()
+    scene, task = resolve_id("PennyProbeDrive-Plane-v0")
+    env = gym.make("PennyProbeDrive-Plane-v0", backend="python")
+    env.reset(seed=0)
+    s = env.unwrapped.state
+    target = s[:2] + 0.05 * np.array([math.cos(s[3]), math.sin(s[3])])  # on the heading line, 5 cm ahead
+    assert pair_theorem(scene, task, s, target) is None
+    env.reset(seed=0, options={"state": s, "target": target})
+    for k in range(200):
+        _, _, term, trunc, info = env.step(np.array([0.3 if k < 10 else 0.0]))
+        if term or trunc:
+            break
+    assert info["is_success"]
+    env.close()
+
+
+def test_theorem_cells_refuse_bad_input():
+    """An id that is not registered, a non-string id, an unknown field, a malformed state or target: clear errors."""
+    from penny_env.analysis.controllability_theorems import pair_theorem, resolve_id, theorem_for
+    from penny_env.envs.scene import UnknownFieldError
+
+    with pytest.raises(ValueError, match="PennyProbeSteer-Moon-v0"):
+        theorem_for("PennyProbeSteer-Moon-v0")
+    with pytest.raises(TypeError, match="env_id"):
+        theorem_for(3)
+    with pytest.raises(UnknownFieldError, match="walls"):
+        theorem_for("PennyProbeSteer-Plane-v0", walls=1)
+    with pytest.raises(ValueError, match="law"):
+        theorem_for("PennyProbeSteer-Ellipse-Elastic-v0", law="sticky")
+    scene, task = resolve_id("PennyProbeSteer-Plane-v0")
+    with pytest.raises(ValueError, match="state"):
+        pair_theorem(scene, task, [0.0] * 5, [0.0, 0.0])
+    with pytest.raises(ValueError, match="target"):
+        pair_theorem(scene, task, [0.0] * 6, [0.0, math.nan])

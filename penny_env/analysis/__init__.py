@@ -15,6 +15,7 @@ Modules (each report is a command, ``python -m penny_env.analysis.<name> --help`
 * :mod:`penny_env.analysis.dynamics`   - reachable sets and Lyapunov exponents of batches of pennies;
 * :mod:`penny_env.analysis.controllability` - does controllability of the penny need impacts? (sampled reachable sets).
 * :mod:`penny_env.analysis.impact_geometry` - the impact laws in scaled speeds and the formulas of docs/controllability_theory.md.
+* :mod:`penny_env.analysis.controllability_theorems` - which probe cells and start/target pairs a theorem makes impossible.
 
 scipy, matplotlib and tqdm are imported only inside these modules (never at ``import penny_env``).
 """
