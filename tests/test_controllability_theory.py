@@ -533,6 +533,10 @@ def test_theory_page_names_only_tests_that_exist():
     assert sorted(defined - cited) == ["test_impact_geometry_refuses_bad_input", "test_theory_page_names_only_tests_that_exist"]
     for tid in ("T1", "T2", "T3", "T4"):
         assert re.search(rf"^## {tid} ", page, re.M), tid
+    # the anchors that controllability_theorems links to are the headings' GitHub slugs
+    from penny_env.analysis.controllability_theorems import DRIVE, STEER
+    slugs = {re.sub(r"[^a-z0-9 -]", "", h.lower()).replace(" ", "-") for h in re.findall(r"^## (.+)$", page, re.M)}
+    assert {STEER[1], DRIVE[1]} <= slugs and "t1-impact-laws-in-scaled-speeds" in slugs
 
 
 def test_impact_geometry_refuses_bad_input():
