@@ -195,7 +195,8 @@ def test_t2_contact_point_moves_at_most_r_theta_dot_after_the_last_impact(name, 
 @pytest.mark.parametrize("law", LAWS, ids=str)
 def test_t2_rest_making_spin_stops_the_rolling(name, law):
     """T2.4: at an oblique impact the pre-impact spin w* = u(|nu|^2 - (1+e) nu_u^2)/((1+e) nu_u nu_w) leaves
-    theta_dot = 0 (the simulator's law); with e = 0 the penny is then at rest (phi_dot = 0 too). Off w* it does not."""
+    theta_dot = 0 (the simulator's law); with e = 0 the penny is then at rest (phi_dot = 0 too). The spins that leave
+    |R theta_dot+| < v_tol form the interval about w* of the stated half-width: 0.99 of it inside, 1.01 outside."""
     table, rng = TABLES[name], np.random.default_rng(9)
     for end in (1, -1):
         S = states_on_wall(table, 16, rng, end, oblique=1.2)
@@ -211,8 +212,15 @@ def test_t2_rest_making_spin_stops_the_rolling(name, law):
         np.testing.assert_allclose(post[:, 4] / np.abs(S[:, 4]), 0.0, atol=1e-12)
         if law == 0.0:
             np.testing.assert_allclose(post[:, 5] / np.abs(S[:, 4]), 0.0, atol=1e-12)
-        S[:, 5] += 0.1 * np.abs(S[:, 4])  # another spin: the rolling survives
-        assert np.all(np.abs(batch.impact_map(S, end, table=table, law=law)[:, 4]) > 1e-6 * np.abs(S[:, 4]))
+        # the spins leaving |R theta_dot+| < v_tol = 0.01 m/s: an interval of half-width
+        # sqrt(I + m R^2) v_tol |nu|^2 / (R (1 + e) |nu_u nu_w|) in the scaled spin about w*
+        half = math.sqrt(P.rolling_inertia) * 0.01 * (nu_u ** 2 + nu_w ** 2) / (P.R * (1 + e) * np.abs(nu_u * nu_w))
+        w_star = ig.scaled_speeds(0.0, S[:, 5], P)[1]
+        for factor, inside in ((0.99, True), (-0.99, True), (1.01, False), (-1.01, False)):
+            T = S.copy()
+            T[:, 5] = ig.unscaled_speeds(0.0, w_star + factor * half, P)[1]
+            speed = np.abs(P.R * batch.impact_map(T, end, table=table, law=law)[:, 4])
+            assert np.all((speed < 0.01) == inside), (factor, speed)
 
 
 def test_t2_stopping_angles_of_the_paper_penny():
