@@ -287,15 +287,16 @@ def compiled_env_functions(kind: int) -> dict:
         return _COMPILED[key]
     import numba
 
-    from ..physics import numba_math
+    from ..physics import numba_math, parallel
     from . import functional, tasks
 
-    phys = compiled.compiled_functions(kind)
-    own = compiled.cacheable(kind)
+    phys = compiled.compiled_functions(kind)  # (also picks the threading layer: physics/parallel.py)
+    own = compiled.cacheable(kind) and compiled.disk_cache_available()
+    modules = compiled.physics_modules() + (tasks, functional)
     if own:
-        compiled.drop_stale_cache(Path(__file__).with_name("__pycache__"),
-                                  compiled.physics_modules() + (tasks, functional))
-    variant = compiled.variant_name(kind)
+        compiled.drop_stale_cache(Path(__file__).with_name("__pycache__"), modules)
+    # the digest of every inlined source in the copies' names: never stale, whatever the cache location
+    variant = f"{compiled.variant_name(kind)}_{compiled.source_digest(modules)}"
     jit = numba.njit(cache=own)
     # inlined: a call that passes arrays increments and decrements their reference counts, atomically
     inline = numba.njit(cache=own, inline="always")
@@ -319,7 +320,7 @@ def compiled_env_functions(kind: int) -> dict:
     namespace["env_step"] = copy(env_step, inline)
     namespace["step_envs"] = copy(step_envs, numba.njit(parallel=True, cache=own))
     _COMPILED[key] = {"env_step": single,
-                      "step_envs": copy(step_envs_packed),
+                      "step_envs": parallel.locked(copy(step_envs_packed)),  # one parallel call at a time
                       "observe_rows": copy(observe_rows_packed),
                       "initial_observation": copy(initial_observation_packed)}
     return _COMPILED[key]
