@@ -18,6 +18,7 @@ import datetime as _dt
 import json
 import os
 import platform
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -25,9 +26,9 @@ import tempfile
 SHAPES = {  # shape -> an env id on it (and the batch table spec)
     "Ellipse": ("PennyReach-Ellipse-v0", {"kind": "ellipse", "a": 0.3, "b": 0.2}),
     "Circle": ("PennyPark-Circle-v0", {"kind": "circle", "r": 0.2}),
-    "Stadium": ("PennyImpacts-Stadium-v0", {"kind": "stadium", "half_length": 0.1, "r": 0.2}),
-    "RoundedRectangle": ("PennyReach-RoundedRectangle-v0", {"kind": "rounded_rectangle", "half_width": 0.3,
-                                                            "half_height": 0.2, "r": 0.05}),
+    "Stadium": ("PennyImpacts-Stadium-v0", {"kind": "stadium", "radius": 0.1, "length": 0.15}),
+    "RoundedRectangle": ("PennyReach-RoundedRectangle-v0", {"kind": "rounded_rectangle", "width": 0.3,
+                                                            "height": 0.2, "radius": 0.04}),
     "Plane": ("PennyReach-Plane-v0", None),
 }
 ENTRIES = ("single", "vector", "batch")
@@ -55,7 +56,9 @@ def build_seconds(entry: str, shape: str, cache_dir: str) -> tuple[float, float]
     env_id, table = SHAPES[shape]
     env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
     out = subprocess.run([sys.executable, "-c", _CHILD, entry, env_id, json.dumps(table)], env=env,
-                         capture_output=True, text=True, check=True)
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"{entry} on {shape} failed (exit {out.returncode}): {out.stderr[-2000:]}")
     wall, cpu = json.loads(out.stdout.strip().splitlines()[-1])
     return float(wall), float(cpu)
 
@@ -105,7 +108,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     shapes = ["Plane"] if args.quick else (args.shapes or list(SHAPES))
     entries = ["single"] if args.quick else (args.entries or list(ENTRIES))
-    command = "python -m penny_env.analysis.compile_time " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "python -m penny_env.analysis.compile_time " + shlex.join(argv if argv is not None else sys.argv[1:])
     text = report(measure(shapes, entries), command.strip())
     if args.out:
         with open(args.out, "w") as f:

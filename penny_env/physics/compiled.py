@@ -18,8 +18,9 @@ that the two agree bitwise.
 
 Every registered table (Ellipse, Circle, Stadium, RoundedRectangle, and any table registered with
 formulas, see docs/extending.md) compiles; other tables (ConvexTable, protocol objects) run the
-plain-Python loop. The first use in a fresh install compiles for some seconds and numba caches the
-machine code on disk (``cache=True``).
+plain-Python loop. The first use in a fresh install compiles (about 10 s of CPU per table shape and
+entry point, docs/compile_time.md; :func:`announce_compile` says so) and numba caches the machine
+code on disk (``cache=True``).
 """
 from __future__ import annotations
 
