@@ -186,3 +186,22 @@ def test_an_edited_task_module_is_recompiled_with_numba_cache_dir_set(tmp_path):
     compiled2, python2 = rewards()
     assert python2 == python + 1000.0
     assert compiled2 == python2
+
+
+def test_every_cached_compiled_function_is_named_after_the_sources_it_inlines():
+    """Siblings of the NUMBA_CACHE_DIR test: for every table kind, every compiled entry point of the
+    physics (batch API) and of the env step (single and vector env) carries the digest of all the
+    modules it inlines in its name, after which numba names its cache files."""
+    pytest.importorskip("numba")
+    from penny_env.envs import functional, tasks
+    from penny_env.physics import compiled
+    from penny_env.physics.tables import COMPILED_FORMULAS
+
+    physics = compiled.source_digest(compiled.physics_modules())
+    env = compiled.source_digest(compiled.physics_modules() + (tasks, functional))
+    assert physics != env
+    for kind in range(-1, len(COMPILED_FORMULAS)):
+        for digest, fns in ((physics, compiled.compiled_functions(kind)), (env, functional.compiled_env_functions(kind))):
+            for name, f in fns.items():
+                f = f if hasattr(f, "py_func") else f.__wrapped__  # the parallel calls' lock
+                assert f.py_func.__qualname__.endswith(f"_{digest}"), (kind, name, f.py_func.__qualname__)
