@@ -122,6 +122,10 @@ def report(rows, n: int, steps: int, repeats: int, command: str, load_before: fl
              "over the penny_env default's.", "",
              "| setup | layer | threads | quiet [M steps/s] | busy [M steps/s] | busy / quiet | quiet / default | busy / default |",
              "|---|---|---:|---:|---:|---:|---:|---:|"]
+    if max(load_before, os.getloadavg()[0]) > 0.5 * (os.cpu_count() or 1):
+        lines[4:4] = [f"**Preliminary: the machine was not quiet** (load average above half its {os.cpu_count()} CPUs): "
+                      "\"quiet\" only means no busy process was added, and other work moved every figure. Rerun on an "
+                      "idle machine for the quiet-machine comparison.", ""]
     for r in rows:
         rel_q = f"{r['quiet'] / ref['quiet']:.2f}" if ref else "-"
         rel_b = f"{r['busy'] / ref['busy']:.2f}" if ref else "-"
