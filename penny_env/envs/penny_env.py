@@ -9,6 +9,7 @@ import gymnasium as gym
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
+from ..physics.compiled import announce_compile
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys
 from .functional import env_functions, env_params, kinetic_energy, pack
@@ -163,6 +164,8 @@ class PennyEnv(gym.Env):
         self._times = np.empty((1, IMPACTS_BUFFER))
         self._ends = np.empty((1, IMPACTS_BUFFER), dtype=np.int64)
         if core.backend == "numba":  # load the machine code now, not in the first step
+            announce_compile("single env step", "open plane" if core.table is None else type(core.table).__name__,
+                             self._m.kind, self._fns["env_step"])
             obs = np.empty((1, core.obs_dim), dtype=np.float32)
             s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._consts)

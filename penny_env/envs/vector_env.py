@@ -8,6 +8,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..physics.compiled import announce_compile
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, seed_keys, X, Y
 from .functional import env_functions, env_params, kinetic_energy, pack
@@ -145,6 +146,8 @@ class PennyVectorEnv(VectorEnv):
     def _warm_up(self):
         """Load the machine code (or compile it) now rather than in the first step."""
         c = self._core
+        announce_compile("vector env step", "open plane" if c.table is None else type(c.table).__name__, self._m.kind,
+                         self._fns["step_envs"].__wrapped__)
         S = np.zeros((6, 1))
         trig = np.zeros((4, 1))
         obs = np.empty((1, c.obs_dim), dtype=np.float32)

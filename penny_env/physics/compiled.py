@@ -10,15 +10,17 @@ plain loop's dispatch. The physics is compiled once per table kind (:func:`compi
 ``wall_terms`` and ``wall_hess`` call that table's formulas directly, so the impact search pays no
 branch over the registered shapes and keeps its helpers inlined (with a dispatch over the four
 built-in shapes, the vector env's step was about 3 % slower: PennyImpacts-Stadium-v0, N = 4096). The law is chosen at run time (:func:`law_dispatch_source`,
-generated from laws.COMPILED_LAWS into a real file, so that numba's on-disk cache recognises it from
-one process to the next): laws only act at impacts. A penny therefore takes the same operations as
+generated from laws.COMPILED_LAWS and compiled without the disk cache, its machine code cached
+within its callers'): laws only act at impacts. Every cached copy's name carries a hash of the sources
+it inlines (:func:`source_digest`), so no cache location can serve stale machine code. A penny therefore takes the same operations as
 in the plain-Python loop (physics/pennies.py's ``backend="python"``); tests/test_compiled.py checks
 that the two agree bitwise.
 
 Every registered table (Ellipse, Circle, Stadium, RoundedRectangle, and any table registered with
 formulas, see docs/extending.md) compiles; other tables (ConvexTable, protocol objects) run the
-plain-Python loop. The first use in a fresh install compiles for some seconds and numba caches the
-machine code on disk (``cache=True``).
+plain-Python loop. The first use in a fresh install compiles (about 10 s of CPU per table shape and
+entry point, docs/compile_time.md; :func:`announce_compile` says so) and numba caches the machine
+code on disk (``cache=True``).
 """
 from __future__ import annotations
 
@@ -102,30 +104,38 @@ def law_dispatch_source(n_laws: int) -> str:
     return "\n".join(lines)
 
 
-def _law_dispatch(folder: Path, n_laws: int):
-    """law_terms of :func:`law_dispatch_source`, defined from a file in ``folder`` (written only when
-    its text changes: numba's cache keys on the file's time stamp); in memory where it cannot be written."""
+def _law_dispatch(n_laws: int):
+    """law_terms of :func:`law_dispatch_source`, defined in memory (from a pseudo-file). It is compiled
+    without numba's cache (numba has no cache locator for a pseudo-file, and writing a real file next to
+    the package fails on a read-only install); its callers are cached, with its machine code linked
+    into theirs, and their names carry :func:`source_digest`, which covers this module's generator."""
     source = law_dispatch_source(n_laws)
-    path = None if folder is None else folder / f"penny_env_laws_{n_laws}.py"
-    try:
-        if path is None:
-            raise OSError("no file: not cached")
-        if not path.exists() or path.read_text() != source:
-            folder.mkdir(exist_ok=True)
-            path.write_text(source)
-        filename = str(path)
-    except OSError:
-        filename = "<penny_env law dispatch>"
-    scope: dict = {"__name__": __name__}  # numba's cache pickles the function's module by name
-    exec(compile(source, filename, "exec"), scope)
+    scope: dict = {"__name__": __name__}
+    exec(compile(source, "<penny_env law dispatch>", "exec"), scope)
     return scope["law_terms"]
 
 
+def source_digest(modules) -> str:
+    """A short hash of the sources of ``modules``: it goes into the qualified name of every cached
+    compiled copy (:func:`jit_copy`), so numba's cache files are named after the sources of everything
+    they inline. numba checks a cached function against its own file only, while these copies also
+    freeze constants and callees of other modules (quadrature rules, table formulas, laws, the physics
+    called by the environment's step); a name keyed on all those sources can never load stale machine
+    code, whichever cache location numba picks (the package's __pycache__, NUMBA_CACHE_DIR, the
+    user-wide cache of a read-only install)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for m in modules:
+        h.update(m.__name__.encode() + b"\0" + Path(m.__file__).read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
 def drop_stale_cache(folder, modules) -> None:
-    """numba checks a cached function against its own file only, while these functions also
-    freeze constants and functions of other modules (quadrature rules, table kinds, the physics
-    called by the environment's kernel): drop the cached machine code in ``folder`` when any of
-    ``modules`` changed since it was written."""
+    """Tidy-up only (correctness comes from :func:`source_digest` in the copies' names): delete the
+    machine code cached in ``folder`` (a package __pycache__) when any of ``modules`` changed since it
+    was written, so that edits do not pile up old files there. Other cache locations keep old files,
+    which are never loaded (their names carry the old digest)."""
     import hashlib
 
     folder = Path(folder)
@@ -140,6 +150,63 @@ def drop_stale_cache(folder, modules) -> None:
         stamp.write_text(digest)
     except OSError:  # read-only install: numba caches elsewhere (or not at all)
         pass
+
+
+_CACHE_AVAILABLE: list = []
+
+
+def disk_cache_available() -> bool:
+    """numba finds a writable place to cache this package's functions: the package's __pycache__,
+    NUMBA_CACHE_DIR, or numba's user-wide cache directory (a read-only install). Where none is writable
+    (no writable home either), the functions compile in each process, with one logged warning, rather
+    than fail ("cannot cache function ...: no locator available")."""
+    if not _CACHE_AVAILABLE:
+        import numba
+        try:
+            numba.njit(cache=True)(_no_wall)  # numba picks its cache location when caching is enabled
+            ok = True
+        except RuntimeError:
+            ok = False
+            import logging
+            logging.getLogger("penny_env").warning("penny_env: numba finds no writable cache directory (set NUMBA_CACHE_DIR to one): "
+                           "the compiled env step and physics compile in every process")
+        _CACHE_AVAILABLE.append(ok)
+    return _CACHE_AVAILABLE[0]
+
+
+_ANNOUNCED: set = set()
+
+
+def compiles_now(dispatcher):
+    """True if numba has no machine code cached on disk for ``dispatcher`` (its first call compiles),
+    False if its cache index exists (the first call loads it; it could still compile a signature the
+    index lacks), None if numba's cache internals are not as expected (private API, numba 0.61-0.68)."""
+    cache = getattr(dispatcher, "_cache", None)
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    if cache is None:
+        return None
+    if index is None:
+        return True if type(cache).__name__ == "NullCache" else None  # NullCache: caching is off
+    return not Path(index).exists()
+
+
+def announce_compile(entry: str, shape: str, kind: int, dispatcher) -> None:
+    """One line on the "penny_env" logger (at WARNING, which Python prints to stderr when logging is
+    not configured; silence it with logging.getLogger("penny_env").setLevel(logging.ERROR)) before
+    the first build of ``entry`` for table kind ``kind`` in this process, if numba will compile it
+    (:func:`compiles_now`); nothing when it loads the cache. Once per (entry, kind) per process."""
+    if (entry, kind) in _ANNOUNCED:
+        return
+    _ANNOUNCED.add((entry, kind))
+    fresh = compiles_now(dispatcher)
+    if fresh is False:
+        return
+    import logging
+    verb = "compiling" if fresh else "compiling (or loading from numba's cache)"
+    logging.getLogger("penny_env").warning(
+        f"penny_env: {verb} the {entry} for table {shape}: the first use of a table shape after installing takes "
+        "about 10 s (up to a minute on a slow or busy machine); numba caches the machine code, later runs load it "
+        "in about a second")
 
 
 def physics_modules() -> tuple:
@@ -230,13 +297,14 @@ def compiled_functions(kind: int) -> dict:
     key = variant_key(kind)
     if key in _COMPILED:
         return _COMPILED[key]
-    own = cacheable(kind)
-    variant = variant_name(kind)
-    cache = Path(__file__).with_name("__pycache__")
+    from . import parallel as parallel_setup
+    parallel_setup.configure()  # before any parallel loop runs: the threading layer is chosen once per process
+    own = cacheable(kind) and disk_cache_available()
+    modules = physics_modules()
+    variant = f"{variant_name(kind)}_{source_digest(modules)}"
     if own:
-        modules = physics_modules()
+        cache = Path(__file__).with_name("__pycache__")
         drop_stale_cache(cache, modules)
-        drop_stale_cache(cache / "__pycache__", modules)  # the generated law dispatch's machine code
         drop_stale_cache(Path(__file__).parent / "tables" / "__pycache__", modules)  # the formulas' copies
 
     jit = numba.njit(cache=own)
@@ -270,15 +338,15 @@ def compiled_functions(kind: int) -> dict:
         namespace["wall_terms"] = namespace["wall_hess"] = copy(_no_wall)
     for j, update in enumerate(COMPILED_LAWS):
         namespace[f"law_{j}"] = formula(update)
-    namespace["law_terms"] = copy(_law_dispatch(cache if own else None, len(COMPILED_LAWS)))
+    namespace["law_terms"] = copy(_law_dispatch(len(COMPILED_LAWS)), numba.njit(cache=False))
     fns = {f.__name__: namespace[f.__name__] for f in sources}
     # the loops over pennies, compiled as copies too: module-level functions whose callees are
     # globals of the namespace (closures over dispatchers would miss numba's cache every process)
     namespace["prange"] = numba.prange
     namespace["_angle_trig"] = copy(_angle_trig)
     parallel = numba.njit(parallel=True, cache=own)
-    for f in (_advance_batch, _flow_batch, _first_impact_batch):
-        fns[f.__name__] = copy(f, parallel)
+    for f in (_advance_batch, _flow_batch, _first_impact_batch):  # called under parallel.PARALLEL_LOCK
+        fns[f.__name__] = parallel_setup.locked(copy(f, parallel))
     _COMPILED[key] = fns
     return fns
 
@@ -346,11 +414,15 @@ class CompiledBatch:
         self._fns = compiled_functions(self.model.kind)
         self.R = params.R
         self.plane = table is None
+        self.table = table
         self._warm_up()
 
     def _warm_up(self):
         """Compile (or load from numba's cache) every path now rather than in the middle of a run:
         a batch of one penny at rest, and the one-penny rerun used when a buffer overflows."""
+        batch = self._fns["_flow_batch" if self.plane else "_advance_batch"]
+        announce_compile("compiled batch", "open plane" if self.plane else type(self.table).__name__, self.model.kind,
+                         batch.__wrapped__)
         S = np.zeros((6, 1))
         S[4] = 1.0
         zero = np.zeros(1)

@@ -10,6 +10,11 @@ sin, cos, sqrt, inf = math.sin, math.cos, math.sqrt, math.inf
 abs, minimum, maximum = abs, min, max
 
 
-@njit(cache=True)
 def where(cond, a, b):
     return a if cond else b
+
+
+try:
+    where = njit(cache=True)(where)
+except RuntimeError:  # no writable cache location (a read-only install without a writable home)
+    where = njit(where)

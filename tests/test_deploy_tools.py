@@ -1,0 +1,63 @@
+"""The compile notice (physics/compiled.py's announce_compile) and the quick modes of the commands that
+measure first-use compile time and the vector env beside a busy process."""
+import logging
+
+import pytest
+
+numba = pytest.importorskip("numba")
+
+
+def test_the_compile_notice_is_one_line_once_and_only_when_numba_compiles(caplog):
+    from penny_env.physics import compiled
+
+    def f(x):
+        return x + 1
+
+    uncached = numba.njit(f)  # caching off: its first call compiles
+    assert compiled.compiles_now(uncached) is True
+    compiled._ANNOUNCED.discard(("test entry", 99))
+    with caplog.at_level(logging.WARNING, logger="penny_env"):
+        compiled.announce_compile("test entry", "Shape", 99, uncached)
+        compiled.announce_compile("test entry", "Shape", 99, uncached)  # once per (entry, kind) per process
+    lines = [r.getMessage() for r in caplog.records if r.name == "penny_env"]
+    assert len(lines) == 1 and lines[0].startswith("penny_env: compiling the test entry for table Shape")
+
+
+def test_no_notice_when_the_machine_code_is_cached(caplog, tmp_path, monkeypatch):
+    from penny_env.physics import compiled
+
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))  # a fresh cache for this test's function
+    cached = numba.njit(cache=True)(compiled._no_wall)
+    assert compiled.compiles_now(cached) is True  # nothing cached yet
+    import numpy as np
+    assert np.isnan(numba.njit(cache=True)(compiled._no_wall)(0, 0.0, 0.0)[0])  # compiles and saves
+    again = numba.njit(cache=True)(compiled._no_wall)
+    assert compiled.compiles_now(again) is False
+    compiled._ANNOUNCED.discard(("cached entry", 98))
+    with caplog.at_level(logging.WARNING, logger="penny_env"):
+        compiled.announce_compile("cached entry", "Shape", 98, again)
+    assert not [r for r in caplog.records if r.name == "penny_env"]
+
+
+@pytest.mark.slow
+def test_compile_time_quick(capsys, reports_untouched):
+    from penny_env.analysis import compile_time
+    compile_time.main(["--quick"])
+    out = capsys.readouterr().out
+    assert "| Plane | single |" in out and "Total cold CPU seconds per shape" in out
+    row = next(line for line in out.splitlines() if line.startswith("| Plane | single |"))
+    cold_cpu, warm_cpu = float(row.split("|")[4]), float(row.split("|")[6])
+    assert cold_cpu > warm_cpu > 0  # the second process loaded what the first compiled
+
+
+@pytest.mark.slow
+def test_contention_quick(capsys, reports_untouched):
+    from penny_env.analysis import contention
+    contention.main(["--quick"])
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("| penny_env default |") or line.startswith("| 1 thread |")]
+    assert len(rows) == 2, out
+    assert "| penny_env default | workqueue |" in out  # the layer penny_env picks
+    for row in rows:
+        quiet, busy = float(row.split("|")[4]), float(row.split("|")[5])
+        assert quiet > 0 and busy > 0

@@ -1,0 +1,106 @@
+"""The compiled parallel loops survive what deployments do: fork() after a parallel call, two Python
+threads stepping two vector envs (and batch calls), and a user's own threading layer choice
+(physics/parallel.py). Each case runs in a subprocess, so an abort fails the test, not the suite."""
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("numba")
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_script(code, **env):
+    """(returncode, stdout + stderr) of ``code`` in a new interpreter on this checkout."""
+    full = {k: v for k, v in os.environ.items() if k not in ("NUMBA_THREADING_LAYER", "OMP_WAIT_POLICY")}
+    full.update(env, PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, env=full, capture_output=True,
+                         text=True, timeout=600)
+    return out.returncode, out.stdout + out.stderr
+
+
+FORK = """
+    import os
+    import numpy as np
+    import gymnasium as gym
+    import penny_env, penny_env.batch as pb
+
+    def use(seed):
+        v = gym.make_vec("PennyReach-Plane-v0", num_envs=64)
+        v.reset(seed=seed)
+        for _ in range(5):
+            v.step(np.full((64, 2), 0.5, dtype=np.float32))
+        S = np.zeros((8, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, 8)
+        res = pb.simulate(S, table={"kind": "circle", "r": 0.2}, law="elastic", t_final=0.3)
+        assert res.final_states.shape == (8, 6)
+
+    use(0)  # the parent has run the parallel loops (vector env and batch)
+    pid = os.fork()
+    if pid == 0:
+        try:
+            use(1)
+        finally:
+            os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    print("child exit", os.waitstatus_to_exitcode(status))
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork() on this platform")
+def test_a_forked_child_builds_and_steps_a_vector_env_after_the_parent_ran_one():
+    code, out = run_script(FORK)
+    assert code == 0 and "child exit 0" in out, out
+
+
+THREADS = """
+    import threading
+    import numpy as np
+    import gymnasium as gym
+    import numba
+    import penny_env, penny_env.batch as pb
+
+    envs = [gym.make_vec("PennyReach-Plane-v0", num_envs=256) for _ in range(2)]
+    errors = []
+
+    def run(v, seed):
+        try:
+            v.reset(seed=seed)
+            a = np.full((256, 2), 0.3, dtype=np.float32)
+            for _ in range(200):
+                v.step(a)
+            S = np.zeros((16, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, 16)
+            for _ in range(20):
+                pb.simulate(S, table={"kind": "circle", "r": 0.2}, law="elastic", t_final=0.2)
+        except Exception as exc:  # noqa: BLE001
+            errors.append(exc)
+
+    ts = [threading.Thread(target=run, args=(v, i)) for i, v in enumerate(envs)]
+    for t in ts:
+        t.start()
+    for t in ts:
+        t.join()
+    assert not errors, errors
+    print("layer", numba.threading_layer())
+"""
+
+
+@pytest.mark.parametrize("layer", [None, "workqueue"])
+def test_two_python_threads_step_two_vector_envs_and_batches_at_once(layer):
+    # workqueue (penny_env's choice, and numba's only layer where OpenMP is missing) aborts the process
+    # on concurrent parallel calls unless they are serialised
+    code, out = run_script(THREADS, **({"NUMBA_THREADING_LAYER": layer} if layer else {}))
+    assert code == 0 and "layer workqueue" in out, out
+
+
+def test_the_users_threading_layer_choice_is_kept():
+    code, out = run_script("""
+        import numba, numpy as np, gymnasium as gym, penny_env
+        gym.make_vec("PennyReach-Plane-v0", num_envs=4).reset(seed=0)
+        print("layer", numba.threading_layer())
+    """, NUMBA_THREADING_LAYER="omp")
+    if code != 0 and "threading layer" in out and "omp" in out.lower() and "could not" in out.lower():
+        pytest.skip("numba's OpenMP layer does not load here")
+    assert code == 0 and "layer omp" in out, out
