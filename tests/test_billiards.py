@@ -144,3 +144,11 @@ def test_quick_report_writes_to_a_temporary_directory(reports_untouched, capsys)
     for png in re.findall(r"\]\((\S+\.png)\)", text):
         assert (out.parent / png).stat().st_size > 0
     assert list(reports_untouched.iterdir()) == []
+
+
+def test_clopper_pearson_matches_scipy_and_is_honest_at_the_ends():
+    stats = pytest.importorskip("scipy.stats")
+    for k, n in [(0, 8), (3, 8), (8, 8), (1, 32)]:
+        lo, hi = bl.clopper_pearson(k, n)
+        assert lo == pytest.approx(stats.beta.ppf(0.025, k, n - k + 1) if k else 0.0, abs=1e-12)
+        assert hi == pytest.approx(stats.beta.ppf(0.975, k + 1, n - k) if k < n else 1.0, abs=1e-12)

@@ -114,19 +114,22 @@ def section_states(s, beta, psi, rho, table, params, chart=None) -> np.ndarray:
     return S
 
 
-def sample_invariant(n, table, rng, params, rho, chart=None):
+def sample_invariant(n, table, rng, params, rho, chart=None, max_spin=None):
     """n states drawn from the elastic boundary map's invariant measure |v_n| ds dbeta dpsi (rejection from
-    uniform (s, beta, psi); only inward-moving states with the other end inside the table): (states, s, beta, psi)."""
+    uniform (s, beta, psi); only inward-moving states with the other end inside the table): (states, s, beta, psi).
+    max_spin: the measure restricted to |sin psi| <= max_spin (rolling-dominated states)."""
     tab = make_table(table)
     chart = chart if chart is not None else WallChart(tab)
     top = 1.0 / np.sqrt(params.J) + 1.0 / np.sqrt(params.rolling_inertia)
     out = []
     got = 0
     while got < n:
-        m = 4 * (n - got) + 64
+        m = (4 if max_spin is None else 400) * (n - got) + 64
         s, beta, psi = rng.uniform(0, 1, m), rng.uniform(-np.pi / 2, np.pi / 2, m), rng.uniform(-np.pi, np.pi, m)
         dens = normal_speed_density(beta, psi, params)
         keep = (dens < 0) & (rng.uniform(0, top, m) < -dens)
+        if max_spin is not None:
+            keep &= np.abs(np.sin(psi)) <= max_spin
         s, beta, psi = s[keep], beta[keep], psi[keep]
         S = section_states(s, beta, psi, rho, tab, params, chart)
         back = np.asarray(tab.h(S[:, 0] - params.R * np.cos(S[:, 3]), S[:, 1] - params.R * np.sin(S[:, 3]))) < 0
@@ -180,6 +183,9 @@ def iterate(states, ends, n_impacts, *, table, law, params=None, rescale=True) -
     search = _searcher(params, tab)
     for k in range(K):
         live = alive[k]
+        if not live.any():  # every orbit has stopped
+            post[k + 1:] = S
+            break
         t_hit, end = search(S[live])
         idx = np.flatnonzero(live)
         hit = end != 0
