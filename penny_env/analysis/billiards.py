@@ -417,10 +417,10 @@ def main(argv=None):
     colors = dict(zip(RUNS, ("tab:blue", "tab:green", "tab:orange", "tab:red", "tab:purple")))
     pngs = {}
 
-    def save(fig, key):
+    def save(fig, key, dpi=100):  # the dense figures at a lower resolution (about 0.3 MB each)
         fig.tight_layout()
         path = out.with_name(f"{out.stem}_{key}.png")
-        fig.savefig(path, dpi=100)
+        fig.savefig(path, dpi=dpi)
         plt.close(fig)
         pngs[key] = path.name
 
@@ -440,7 +440,7 @@ def main(argv=None):
                     ax.set_xlabel("s (arc length / perimeter)")
                 if q == 0:
                     ax.set_ylabel(label)
-        save(fig, f"portrait_{key}")
+        save(fig, f"portrait_{key}", dpi=60)
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     for tname in names:
@@ -476,7 +476,7 @@ def main(argv=None):
         ax.axhline(0, color="0.6", lw=0.5)
         ax.set(xlabel="impacts", ylabel="running largest exponent [1/impact]", title=tname)
         ax.legend(fontsize=7)
-    save(fig, "convergence_map")
+    save(fig, "convergence_map", dpi=70)
 
     fig, axes = plt.subplots(2, 2, figsize=(12, 8))
     for ax, tname in zip(axes.flat, names):
@@ -490,7 +490,7 @@ def main(argv=None):
         ax.set_ylim(-top, top)
         ax.axhline(0, color="0.6", lw=0.5)
         ax.set(xlabel="time [s]", ylabel="running flow exponents [1/s]", title=f"{tname}, elastic: all 5, every orbit (dotted: rolling starts)")
-    save(fig, "convergence_flow")
+    save(fig, "convergence_flow", dpi=70)
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for lname in laws:
