@@ -218,7 +218,8 @@ def main(argv=None):
               "differ by 1e-10 (relative) are simulated together; the exponent is the slope of log distance "
               "against time while the distance is below 1e-4. Initial states: near the table's centre, "
               "|theta_dot| in 5-15 rad/s, phi_dot in -1..1 rad/s. Integrable motion gives exponents near 0 "
-              "(the distance grows linearly, so the fitted slope falls as the time grows).", "",
+              "(the distance grows linearly, so the fitted slope falls as the time grows). Full spectra from the exact "
+              "tangent maps, for more tables and laws, with convergence checks: [billiards.md](billiards.md).", "",
               "| table | pennies | time [s] | fitted | 10% [1/s] | median [1/s] | 90% [1/s] |",
               "|---|---:|---:|---:|---:|---:|---:|", *rows, "",
               "Reachable sets (`reachable_set`): contact points after 1 s from the paper's initial state "
