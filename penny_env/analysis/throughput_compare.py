@@ -34,6 +34,9 @@ import sys
 import tempfile
 import time
 
+from penny_env.analysis.common import load_line
+from penny_env.analysis.provenance import stamp_line
+
 SIZES = (1, 16, 256, 4096)
 QUICK_IDS = ("PennyImpacts-Stadium-v0", "PennyReach-Plane-v0")
 
@@ -166,7 +169,7 @@ def main(argv: list[str] | None = None) -> str:
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
-             f"- command: `{cmd}`",
+             f"- command: `{cmd}`", load_line(), stamp_line("docs/throughput_compare.md"),
              f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), each in its own "
              f"shuffled order (the same for both trees); clock: "
              f"{'CPU time (time.process_time)' if args.clock == 'cpu' else 'wall clock'}",
