@@ -34,9 +34,6 @@ import sys
 import tempfile
 import time
 
-from penny_env.analysis.common import load_line
-from penny_env.analysis.provenance import stamp_line
-
 SIZES = (1, 16, 256, 4096)
 QUICK_IDS = ("PennyImpacts-Stadium-v0", "PennyReach-Plane-v0")
 
@@ -166,6 +163,9 @@ def main(argv: list[str] | None = None) -> str:
             print(f"round {r + 1}/{args.rounds}: {name} measured", flush=True)
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
     cmd = "python -m penny_env.analysis.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
+    # (imported here: the workers run this file against other source trees, which may lack these)
+    from penny_env.analysis.common import load_line
+    from penny_env.analysis.provenance import stamp_line
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
