@@ -78,7 +78,7 @@ def test_report_header_carries_the_sources_line(tmp_path):
     from penny_env.analysis import common
     lines = common.header("t", "penny_env.analysis.stability", ["--quick"])
     assert any(line.startswith("- sources: sha256 " + provenance.sources_hash("docs/stability.md")) for line in lines)
-    assert any(line.startswith("- load at start:") for line in lines)
+    assert any(line.startswith("- load when this header was written:") for line in lines)
     assert not any("sources" in line for line in common.header("t", "some.other.module", []))
 
 

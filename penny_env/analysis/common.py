@@ -34,13 +34,15 @@ def _version(module: str) -> str:
 
 
 def load_line() -> str:
-    """The machine's load when the command started (timings taken beside other work are slower)."""
+    """The machine's load averages when the report's header is made (most commands make it at the
+    end of their run, so the 5-minute average covers the run): timings taken beside other work are
+    slower."""
     try:
         one, five, _ = os.getloadavg()
     except OSError:  # (not available on this platform)
-        return "- load at start: unknown"
-    return (f"- load at start: {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} logical cores; "
-            "timings taken under load are slower than on a quiet machine")
+        return "- load when this header was written: unknown"
+    return (f"- load when this header was written: {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} "
+            "logical cores; timings taken under load are slower than on a quiet machine")
 
 
 def machine_lines() -> list[str]:
