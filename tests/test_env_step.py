@@ -1,5 +1,5 @@
 """The one env step (penny_env/envs/functional.py): its transition is the physics' event loop (a
-certified period a plain flow), it resumes an event loop that stops early, and its compiled and
+certified period a plain flow), it ends the episode where the event loop's cap stops it, and its compiled and
 plain-Python runs (single env and vector env) agree bitwise."""
 import math
 
@@ -55,7 +55,7 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
         acc1 = 0.0 if rng.random() < 0.5 else rng.normal() * 40
         acc2 = rng.normal() * 20
         times, ends = np.full((1, 64), np.nan), np.zeros((1, 64), dtype=np.int64)
-        s1, n, _ = functional.transition(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p, m, core.k, 1.0, 0.0,
+        s1, n, _, _ = functional.transition(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p, m, core.k, 1.0, 0.0,
                                          times, ends, 0)
         times, ends = times[0], ends[0]
         ref, imps, _, elapsed = scalar.advance_m(s, acc1, acc2, p.dt, m, 0)
@@ -68,10 +68,10 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
     assert 0 < certified < len(states) and impacts > 5
 
 
-def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
-    # physics.scalar.advance_m may stop after a bounded amount of work (elapsed < the time asked);
-    # the step then runs the period through scalar.advance_through_m, which calls it again until the
-    # period is done: the same motion and impacts
+def test_transition_stops_where_the_event_cap_stops_the_loop(monkeypatch):
+    # physics.scalar.advance_m stops after its per-call event cap (m.max_events impacts) with elapsed <
+    # the time asked: the step does no more work (bounded work per step, issue 24.4), returns that
+    # call's state and impacts, the motion up to there unaltered, and the elapsed time
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
     rng = np.random.default_rng(3)
     calls = []
@@ -84,21 +84,16 @@ def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
     checked = 0
     for s in _random_inside(rng, core.table, 20):
         s = s[:4] + (30.0, s[5])
-        times0, ends0 = np.zeros((2, 200)), np.zeros((2, 200), dtype=np.int64)
-        ref = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0, times0, ends0, 1)
-        times0, ends0 = times0[1], ends0[1]
+        ref, imps, _, elapsed = advance_m(s, 0.0, 3.0, p.dt, m, 1)
         with monkeypatch.context() as mp:
-            mp.setattr(scalar, "advance_m", one_impact_per_call)  # the step resumes it (scalar.advance_through_m)
             mp.setattr(functional, "advance_m", one_impact_per_call)
             times1, ends1 = np.zeros((1, 200)), np.zeros((1, 200), dtype=np.int64)
             calls.clear()
             got = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0,
                                         times1, ends1, 0)
-            times1, ends1 = times1[0], ends1[0]
-        n = ref[1]
-        assert n > 3 and got[1] == n and got[2] == ref[2] and len(calls) >= n
-        assert np.allclose(got[0], ref[0], rtol=1e-9, atol=1e-12)
-        assert np.allclose(times1[:n], times0[:n], rtol=1e-12, atol=1e-15) and np.array_equal(ends1[:n], ends0[:n])
+        assert len(calls) == 1 and got[1] == 1 and len(imps) == 1 and elapsed < p.dt
+        assert np.array_equal(_bits(got[0]), _bits(ref)) and got[3] == elapsed
+        assert times1[0, 0] == imps[0][0] and ends1[0, 0] == imps[0][1]
         checked += 1
     assert checked == 20
 
@@ -106,9 +101,10 @@ def test_transition_resumes_an_event_loop_that_stops_early(monkeypatch):
 # -- compiled and plain-Python steps agree (moved here from tests/test_compiled.py) -----------------
 @needs_numba
 @needs_numba
-def test_compiled_step_reruns_a_capped_period_as_the_plain_step_does():
-    # an event loop stopped by its per-call cap (m.max_events impacts) is rerun by advance_through_m, in
-    # the compiled step as in the plain one: the same numbers, and the impacts of one uncapped call
+def test_compiled_step_truncates_a_capped_period_as_the_plain_step_does():
+    # an event loop stopped by its per-call cap (m.max_events impacts) ends the episode, truncated with
+    # info "limit" LIMIT_IMPACTS at the state right after the cap's impact, in the compiled step as in
+    # the plain one (the same numbers, bitwise), and those impacts are the first of an uncapped period
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
     capped = m._replace(max_events=2)
     fns = [functional.env_functions(b, m.kind)["env_step"] for b in ("numba", "python")]
@@ -125,8 +121,9 @@ def test_compiled_step_reruns_a_capped_period_as_the_plain_step_does():
         (a, obs_a, t_a, e_a), (b, obs_b, t_b, e_b), (free, _, t_f, _) = outs
         assert np.array_equal(_bits(a[0]), _bits(b[0])) and a[1:] == b[1:]
         assert np.array_equal(obs_a, obs_b) and np.array_equal(_bits(t_a), _bits(t_b)) and np.array_equal(e_a, e_b)
-        n = free[2]
-        assert n > 2 and b[2] == n and np.allclose(t_b[0, :n], t_f[0, :n], rtol=0, atol=1e-12)
+        assert free[2] > 2 and free[9] == functional.LIMIT_NONE and free[10] == p.dt and not free[7]
+        assert b[2] == 2 and b[7] and b[9] == functional.LIMIT_IMPACTS and b[10] < p.dt
+        assert b[10] == t_b[0, 1] and np.allclose(t_b[0, :2], t_f[0, :2], rtol=0, atol=1e-12)
         checked += 1
     assert checked == 20
 

@@ -33,11 +33,24 @@ def _version(module: str) -> str:
         return "not installed"
 
 
+def load_line() -> str:
+    """The machine's load averages when the report's header is made (most commands make it at the
+    end of their run, so the 5-minute average covers the run): timings taken beside other work are
+    slower."""
+    try:
+        one, five, _ = os.getloadavg()
+    except OSError:  # (not available on this platform)
+        return "- load when this header was written: unknown"
+    return (f"- load when this header was written: {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} "
+            "logical cores; timings taken under load are slower than on a quiet machine")
+
+
 def machine_lines() -> list[str]:
     return [
         f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
         f"- Python {platform.python_version()}, numpy {np.__version__}, scipy {_version('scipy')}",
         f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
+        load_line(),
     ]
 
 
@@ -46,8 +59,13 @@ def command_line(module: str, argv: list[str]) -> str:
 
 
 def header(title: str, module: str, argv: list[str]) -> list[str]:
+    """A report's first lines: title, machine, command and (for the committed reports) the hash of
+    the sources that make its numbers (analysis/provenance.py)."""
+    from .provenance import MODULE_REPORTS, stamp_line
+
+    sources = [stamp_line(MODULE_REPORTS[module])] if module in MODULE_REPORTS else []
     return [f"# {title}", "", *machine_lines(), f"- command: `{command_line(module, argv)}`",
-            "- regenerate: run the command above from the repository root", ""]
+            "- regenerate: run the command above from the repository root", *sources, ""]
 
 
 def best_time(fn, repeats: int = 3, min_total: float = 0.0, warmup: bool = True):

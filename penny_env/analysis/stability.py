@@ -29,6 +29,7 @@ from . import common
 from ..physics import Circle, Ellipse, PennyParams, SolverSettings, Stadium, advance_pennies, simulate
 from ..physics.flows import end_kinematics, flow, kinetic_energy
 from ..physics.laws import make_law, normal_form
+from ..physics.params import MIN_GAP
 
 EPS = 2.220446049250313e-16
 CASES = []
@@ -104,7 +105,24 @@ def run_sim(state, params, table, law, **kw):
     return tr, time.perf_counter() - t0
 
 
+def refused_case(run, limit: str, repro=None):
+    """A case beyond a documented limit (docs/physics.md#limits): it passes when run() is refused
+    with a ValueError that names the limit, and fails when it runs or raises anything else."""
+    try:
+        run()
+    except ValueError as exc:
+        if limit in str(exc):
+            return dict(measured={"refused": f"ValueError naming {limit} (documented limit)"}, passed=True, reasons=[],
+                        repro=repro)
+        return dict(measured={"raised": f"ValueError: {exc}"}, passed=False,
+                    reasons=[f"refused without naming the limit {limit}"], repro=repro)
+    return dict(measured={"raised": "nothing"}, passed=False, reasons=[f"accepted beyond the limit {limit}"], repro=repro)
+
+
 def sim_case(state, params, table, law, *, drift_tol=1e-10, repro=None, extra=None, **kw):
+    """Run and check one case; a table narrower than R (1 + MIN_GAP) must be refused instead."""
+    if table is not None and table.inradius < params.R * (1.0 + MIN_GAP):
+        return refused_case(lambda: run_sim(state, params, table, law, **kw), "MIN_GAP", repro)
     law_o = make_law(law)
     tr, wall = run_sim(state, params, table, law, **kw)
     m = traj_metrics(tr, params, table, law_o, ref_state0=state)
@@ -206,7 +224,7 @@ def _near_tangent(quick):
     return out
 
 
-@case("both ends touching at once", "thin ellipse with b slightly above R, penny across it (spinning and rolling): NaN, penetration, energy, rests")
+@case("both ends touching at once", "thin ellipse with b slightly above R, penny across it (spinning and rolling): NaN, penetration, energy, rests; b below R (1 + MIN_GAP) must be refused (documented limit)")
 def _both_ends(quick):
     params = PennyParams()
     R = params.R
@@ -333,7 +351,7 @@ def _zeno(quick):
     return out
 
 
-@case("thin tables", "ellipse with b close to R (inradius just above R), penny along the long axis rolling and spinning; tables with inradius <= R must be refused with ValueError")
+@case("thin tables", "ellipse with b close to R (inradius just above R), penny along the long axis rolling and spinning; tables with inradius <= R, and those narrower than R (1 + MIN_GAP), must be refused with ValueError (documented limit)")
 def _thin(quick):
     params = PennyParams()
     R = params.R
@@ -358,7 +376,7 @@ def _thin(quick):
     return out
 
 
-@case("R close to the table's size", "circle of radius R (1 + eps) and a stadium barely wider than the penny: NaN, penetration, energy")
+@case("R close to the table's size", "circle of radius R (1 + eps) and a stadium barely wider than the penny: NaN, penetration, energy; radii below R (1 + MIN_GAP) must be refused (documented limit)")
 def _tight(quick):
     params = PennyParams()
     R = params.R

@@ -35,7 +35,8 @@ import numpy as np
 import gymnasium as gym
 
 import penny_env  # noqa: F401  (registers the ids)
-from penny_env.analysis.common import cpu_model
+from penny_env.analysis.common import cpu_model, load_line
+from penny_env.analysis.provenance import stamp_line
 from penny_env.envs.registration import env_ids
 
 WALLED = "PennyImpacts-Stadium-v0"
@@ -140,6 +141,7 @@ def main(argv: list[str] | None = None) -> str:
              f"numba {_numba_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
              f"- command: `python -m penny_env.analysis.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
+             load_line(), stamp_line("docs/throughput.md"),
              f"- every rate: the best of {repeats} run(s), for every env alike",
              "", "## Single environment (gymnasium.make, random actions, resets included)", "",
              "| env | us/step | steps/s | vs Pendulum-v1 (time ratio) | impacts/step |", "| --- | ---: | ---: | ---: | ---: |"]

@@ -163,10 +163,13 @@ def main(argv: list[str] | None = None) -> str:
             print(f"round {r + 1}/{args.rounds}: {name} measured", flush=True)
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
     cmd = "python -m penny_env.analysis.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
+    # (imported here: the workers run this file against other source trees, which may lack these)
+    from penny_env.analysis.common import load_line
+    from penny_env.analysis.provenance import stamp_line
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
-             f"- command: `{cmd}`",
+             f"- command: `{cmd}`", load_line(), stamp_line("docs/throughput_compare.md"),
              f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), each in its own "
              f"shuffled order (the same for both trees); clock: "
              f"{'CPU time (time.process_time)' if args.clock == 'cpu' else 'wall clock'}",

@@ -34,8 +34,33 @@ def _mix(z):
     return z ^ (z >> _S31)
 
 
+MAX_RENDER_FPS = 1000  # metadata["render_fps"] of a scene whose control_dt is below 1 ms
+
+
+def render_fps(control_dt: float) -> int:
+    """metadata["render_fps"]: one frame per control period, within [1, MAX_RENDER_FPS] (1 / 5e-324
+    is inf, which int(round()) cannot take)."""
+    fps = 1.0 / control_dt
+    return MAX_RENDER_FPS if fps >= MAX_RENDER_FPS else max(1, int(round(fps)))
+
+
+def check_seed(seed, name: str = "seed", count: int = 1) -> int:
+    """A seed as Gymnasium takes it, an int >= 0 (not a bool; numpy integers too), that with the
+    count - 1 seeds after it (a vector env's seed + i) stays below 2**64, the range of the episode
+    keys (seed_keys; beyond it two seeds would share a key). TypeError or ValueError naming name."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"{name} must be an int >= 0 or None, got {type(seed).__name__}")
+    seed = int(seed)
+    if seed < 0:
+        raise ValueError(f"{name} must be >= 0, got {seed}")
+    if seed + count - 1 >= 1 << 64:
+        what = "" if count == 1 else f" (with the {count} sub-envs' seeds seed + i)"
+        raise ValueError(f"{name} must be < 2**64{what}, got {seed}")
+    return seed
+
+
 def seed_keys(seeds) -> np.ndarray:
-    """uint64 keys from non-negative integer seeds."""
+    """uint64 keys from integer seeds in [0, 2**64) (check_seed)."""
     arr = np.array([int(s) % (1 << 64) for s in np.atleast_1d(seeds)], dtype=np.uint64)
     return _mix(arr + _GOLDEN)
 
@@ -202,11 +227,17 @@ class Core:
             raise ValueError(f"reset options: unknown key(s) {unknown}; allowed: {allowed}")
         states = targets = None
         if "state" in options:
+            W_max, w_max = self.scene.step_speed_limits()
             states = self._rows(options["state"], n, 6, "options['state']")
             for i, s in enumerate(states):
                 name = "options['state']" if n == 1 else f"options['state'][{i}]"
                 as_state(s, name)
                 check_inside(s[:, None], self.params, self.table, name)
+                for j, field, bound in ((THETA_DOT, "theta_dot", W_max), (PHI_DOT, "phi_dot", w_max)):
+                    if abs(s[j]) > bound:  # the scene's init ranges obey the same bound (Scene)
+                        raise ValueError(f"{name}: |{field}| = {abs(s[j]):.6g} rad/s is beyond {bound:.6g} rad/s, from "
+                                         "where a step at the torque limits could pass MAX_ANGULAR_SPEED "
+                                         "(Scene.step_speed_limits; docs/physics.md#limits)")
         if "target" in options:
             if self.impacts:
                 raise ValueError("options['target']: the impacts task's target is the centre of the marked arc, "

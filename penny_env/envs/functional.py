@@ -28,13 +28,17 @@ from typing import NamedTuple
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import Model, advance_m, advance_through_m, certified_free_trig, flow1
+from ..physics.scalar import Model, advance_m, advance_through_m, certified_free_trig, flow1  # noqa: F401
 from .tasks import TaskConstants, on_arc, step_reward
 
 XP = SCALAR      # the math namespace of tasks.py's formulas (numba_math in the compiled copies)
 prange = range   # numba.prange in the compiled copies
 
 _COMPILED: dict = {}  # physics/compiled.py's variant_key(kind) -> compiled entry points
+
+# info["limit"]: which documented limit ended an episode (truncated), docs/envs.md#limits
+LIMIT_NONE, LIMIT_SPEED, LIMIT_IMPACTS = 0, 1, 2
+LIMIT_NAMES = ("", "speed", "impacts")
 
 
 class EnvParams(NamedTuple):
@@ -54,16 +58,19 @@ class EnvParams(NamedTuple):
     goal: int
     Itot: float
     J: float
+    W_max: float       # |theta_dot| beyond which the next step could pass MAX_ANGULAR_SPEED: LIMIT_SPEED
+    w_max: float       # |phi_dot| likewise (and MAX_STEERED_PHASE)
 
 
 def env_params(core, max_steps=None) -> EnvParams:
     """EnvParams of a Core; max_steps overrides the task's (None: the task's)."""
     steps = core.max_steps if max_steps is None else max_steps
+    W_max, w_max = core.scene.step_speed_limits()
     return EnvParams(n_act=core.n_act, steer_only=core.controls == (0,), gain1=float(core.gain1),
                      gain2=float(core.gain2), dt=float(core.dt), max_steps=int(steps),
                      plane=bool(core.plane), impacts=bool(core.impacts), inv_L=float(core.inv_L),
                      s_W=float(core.s_W), s_w=float(core.s_w), goal=int(core.k.goal),
-                     Itot=float(core.Itot), J=float(core.J))
+                     Itot=float(core.Itot), J=float(core.J), W_max=float(W_max), w_max=float(w_max))
 
 
 def clip_action(v):
@@ -124,22 +131,18 @@ def initial_observation(obs, s, tx, ty, p):
 
 
 def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row):
-    """(new state, impacts, arc impacts) of the penny over one control period; c_ph, s_ph: cos and
-    sin of the heading s[3]. The times (since the period's start) and ends of the first
+    """(new state, impacts, arc impacts, elapsed) of the penny over one control period; c_ph, s_ph:
+    cos and sin of the heading s[3]. The times (since the period's start) and ends of the first
     times.shape[1] impacts go into row `row` of times and ends; the counts are exact.
 
     A period the certificate (scalar.certified_free_trig) shows free of impacts is one flow. Any
-    other goes through the physics' event loop (scalar.advance_m). Where its per-call event cap
-    stopped it early (m.max_events impacts: an accumulation, rare), the period is run again by
-    scalar.advance_through_m, which resumes the capped calls, so the motion is that of one
-    uninterrupted call (its first call is the same advance_m: the same numbers, bitwise). Calling
-    advance_m directly keeps the resumption loop off the common path (about 1 % of the vector step)."""
+    other goes through the physics' event loop (scalar.advance_m), one call: its per-call event cap
+    (m.max_events = SolverSettings.max_events_per_interval impacts) bounds the step's work. Where
+    the cap stopped it, elapsed < p.dt and the state is the one right after the cap's impact, the
+    true motion up to there (never altered); env_step then ends the episode (LIMIT_IMPACTS)."""
     if p.plane or certified_free_trig(s, c_ph, s_ph, acc1, acc2, p.dt, m):
-        return flow1(s, acc1, acc2, p.dt, m.R), 0, 0
-    s1, impacts, _, elapsed = advance_m(s, acc1, acc2, p.dt, m, 0)
-    if elapsed < p.dt:
-        s1, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, m)
-    s = s1
+        return flow1(s, acc1, acc2, p.dt, m.R), 0, 0, p.dt
+    s, impacts, _, elapsed = advance_m(s, acc1, acc2, p.dt, m, 0)
     n_arc = 0
     cap = times.shape[1]
     for j in range(len(impacts)):
@@ -150,7 +153,7 @@ def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends, ro
         if j < cap:
             times[row, j] = t_j
             ends[row, j] = end
-    return s, len(impacts), n_arc
+    return s, len(impacts), n_arc, elapsed
 
 
 def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, k, times, ends, row):
@@ -158,9 +161,16 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     count the arc impacts, reward, termination, truncation and observation; impact times and ends
     go into row `row` of times and ends (see transition).
 
+    The step is truncated at max_steps, and where the physics reaches a documented limit (the
+    episode ends, the motion is never altered): LIMIT_IMPACTS when the period needed more than the
+    event cap's impacts (the state is then the one at `elapsed` < dt), LIMIT_SPEED when the new
+    state's |theta_dot| > p.W_max or |phi_dot| > p.w_max (a further step could pass
+    MAX_ANGULAR_SPEED). So every step does bounded work: at most m.max_events impacts, from a state
+    within the speed limits.
+
     Returns (state, trig, observation, impacts, count, distance, reward, terminated, truncated,
-    kinetic energy) with trig angle_trig(state), observation observe()'s tuple, count the running arc
-    count."""
+    kinetic energy, limit, elapsed) with trig angle_trig(state), observation observe()'s tuple, count
+    the running arc count, limit a LIMIT_* code and elapsed the simulated time of the step."""
     a0 = clip_action(a0)
     if p.n_act == 2:
         a1 = clip_action(a1)
@@ -169,21 +179,28 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     else:
         acc1, acc2 = (a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2)
         ctrl = (a0 * a0) / 1
-    s1, n_imp, n_arc = transition(s, trig[2], trig[3], acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row)
+    s1, n_imp, n_arc, elapsed = transition(s, trig[2], trig[3], acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row)
+    limit = LIMIT_NONE
+    if elapsed < p.dt:
+        limit = LIMIT_IMPACTS
+    elif abs(s1[4]) > p.W_max or abs(s1[5]) > p.w_max:
+        limit = LIMIT_SPEED
     count = count + n_arc
     dx, dy = tx - s1[0], ty - s1[1]
     d = math.sqrt(dx * dx + dy * dy)
     r, success = step_reward(k, d_prev, d, s1[4], s1[5], ctrl, n_arc, count, XP)
     trig1 = angle_trig(s1)
     o = observe(s1, trig1, tx, ty, count, p)
-    return s1, trig1, o, n_imp, count, d, r, bool(success), steps + 1 >= p.max_steps, kinetic_energy(s1, p)
+    truncated = steps + 1 >= p.max_steps or limit != LIMIT_NONE
+    return s1, trig1, o, n_imp, count, d, r, bool(success), truncated, kinetic_energy(s1, p), limit, elapsed
 
 
 def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, m, k,
-              obs, rew, term, trunc, n_imp, times, ends, ke):
+              obs, rew, term, trunc, n_imp, times, ends, ke, limit):
     """env_step over every env i not in skip (in parallel when compiled), in place: S (6, N),
     trig (4, N), count, dist, steps and time advance; obs, rew, term, trunc, n_imp, times (N, K)
-    (NaN-padded), ends (N, K) (0-padded) and ke (kinetic energy) receive the step's results.
+    (NaN-padded), ends (N, K) (0-padded), ke (kinetic energy) and limit (LIMIT_* codes) receive
+    the step's results.
     Skipped envs (they reset at this step, NEXT_STEP autoreset) keep their state and get zero
     rewards and no flags; their obs and ke rows are left for the caller (it resets them)."""
     for i in prange(S.shape[1]):
@@ -195,13 +212,14 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
             term[i] = False
             trunc[i] = False
             n_imp[i] = 0
+            limit[i] = LIMIT_NONE
             continue
         s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
         tr = (trig[0, i], trig[1, i], trig[2, i], trig[3, i])
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
-        s1, tr1, o, n, c, d, r, te, tu, e = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
-                                                        arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m, k,
-                                                        times, ends, i)
+        s1, tr1, o, n, c, d, r, te, tu, e, lim, el = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
+                                                              arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m,
+                                                              k, times, ends, i)
         write_row(obs, i, o)
         for row in range(6):
             S[row, i] = s1[row]
@@ -211,11 +229,12 @@ def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, 
         count[i] = c
         dist[i] = d
         steps[i] += 1
-        time[i] += p.dt
+        time[i] += el
         rew[i] = r
         term[i] = te
         trunc[i] = tu
         ke[i] = e
+        limit[i] = lim
 
 
 def observe_rows(rows, S, trig, target, count, p, obs):
@@ -253,18 +272,18 @@ def env_step_packed(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
     of obs (1, obs_dim), the impacts into row 0 of times and ends (1, K); returns env_step's tuple
     without the observation."""
     pt, mt, kt = consts
-    s1, trig1, o, n, c, d, r, te, tu, e = env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
-                                                   EnvParams(*pt), Model(*mt), TaskConstants(*kt), times, ends, 0)
+    s1, trig1, o, n, c, d, r, te, tu, e, lim, el = env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
+                                                            EnvParams(*pt), Model(*mt), TaskConstants(*kt), times, ends, 0)
     write_row(obs, 0, o)
-    return s1, trig1, n, c, d, r, te, tu, e
+    return s1, trig1, n, c, d, r, te, tu, e, lim, el
 
 
 def step_envs_packed(S, trig, actions, skip, target, arc, count, dist, steps, time, consts,
-                     obs, rew, term, trunc, n_imp, times, ends, ke):
+                     obs, rew, term, trunc, n_imp, times, ends, ke, limit):
     """step_envs with consts = pack(p, m, k) (PennyVectorEnv's entry point)."""
     pt, mt, kt = consts
     step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, EnvParams(*pt), Model(*mt),
-              TaskConstants(*kt), obs, rew, term, trunc, n_imp, times, ends, ke)
+              TaskConstants(*kt), obs, rew, term, trunc, n_imp, times, ends, ke, limit)
 
 
 def observe_rows_packed(rows, S, trig, target, count, consts, obs):

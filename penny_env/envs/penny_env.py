@@ -11,7 +11,7 @@ from gymnasium.error import ResetNeeded
 
 from ..physics.compiled import announce_compile
 from ..physics.scalar import scalar_model
-from .core import Core, check_actions, seed_keys
+from .core import Core, check_actions, check_seed, render_fps, seed_keys
 from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
@@ -119,7 +119,20 @@ class PennyEnv(gym.Env):
     ``distance``        contact point to target [m]
     ``is_success``      the task's success condition on this step (terminates the episode)
     ``arc_impacts``     impacts task: running count of impacts on the marked arc
+    ``limit``           0, or the documented limit that ended the episode (truncated): 1 "speed"
+                        (|theta_dot| or |phi_dot| past Scene.step_speed_limits(): one more step
+                        could pass MAX_ANGULAR_SPEED), 2 "impacts" (the step needed more than
+                        SolverSettings.max_events_per_interval impacts: the state and ``time`` are
+                        those right after the last one, inside the period); names in
+                        ``penny_env.envs.functional.LIMIT_NAMES``
     ==================  ==========================================================================
+
+    **Bounded work.** Every step does bounded work whatever the actions: the scene's initial
+    speeds are checked at construction, and the limits above end the episode before a step could
+    need more (docs/envs.md#limits). The motion is never altered.
+
+    **Interrupted steps.** A step interrupted by an exception (KeyboardInterrupt) may leave its
+    bookkeeping half done; the next step() then raises ResetNeeded until reset() is called.
 
     **Determinism.** ``reset(seed=k)`` then the same actions give bitwise the same episode;
     later ``reset()`` calls draw the next episodes of the same seed (see core.py). The env pickles.
@@ -137,7 +150,7 @@ class PennyEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self.metadata = dict(self.metadata, render_fps=max(1, int(round(1.0 / self.scene.control_dt))))
+        self.metadata = dict(self.metadata, render_fps=render_fps(self.scene.control_dt))
         self._setup()
 
     def _setup(self):
@@ -153,6 +166,7 @@ class PennyEnv(gym.Env):
         self._renderer = None
         self._trail = deque(maxlen=200)
         self._hud = {}  # what the frame's text line and impact flashes show (rendering.Renderer.draw)
+        self._in_step = False
 
     def _make_core(self):
         core = self._core = Core(self.scene, self.task, backend=self.backend)
@@ -185,6 +199,8 @@ class PennyEnv(gym.Env):
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
+        if seed is not None:
+            seed = check_seed(seed)
         super().reset(seed=seed)
         core = self._core
         if seed is not None:
@@ -209,6 +225,7 @@ class PennyEnv(gym.Env):
         self._count = 0
         self._t = 0.0
         self._done = False
+        self._in_step = False
         x, y = self._s[0], self._s[1]
         dx, dy = self._target[0] - x, self._target[1] - y
         self._d = math.sqrt(dx * dx + dy * dy)
@@ -227,6 +244,9 @@ class PennyEnv(gym.Env):
             raise ResetNeeded("PennyEnv.step() called before reset()")
         if self._done:
             raise ResetNeeded("PennyEnv.step() called after the episode ended; call reset()")
+        if self._in_step:
+            raise ResetNeeded("PennyEnv.step(): the previous step was interrupted (an exception such as "
+                              "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         c = self._core
         a = _action_list(action, c.n_act)
         a1 = a[1] if c.n_act == 2 else 0.0
@@ -234,37 +254,39 @@ class PennyEnv(gym.Env):
         args = (self._s, self._trig, a[0], a1, self._target[0], self._target[1], self._arc[0], self._arc[1],
                 self._count, self._d, self._steps, self._consts, obs)
         prev = self._s
+        self._in_step = True  # cleared once the step's results are all stored (see step's docstring)
         out = self._fns["env_step"](*args, self._times, self._ends)
         n_imp = out[2]
         if n_imp > self._times.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
             self._times, self._ends = np.empty((1, n_imp)), np.empty((1, n_imp), dtype=np.int64)
             out = self._fns["env_step"](*args, self._times, self._ends)
-        s, self._trig, n_imp, self._count, d, reward, terminated, truncated, energy = out
+        s, self._trig, n_imp, self._count, d, reward, terminated, truncated, energy, limit, elapsed = out
         self._s = s
         self._d = d
         self._steps += 1
-        self._t += c.dt
+        self._t += elapsed
         if n_imp:
             times, ends = tuple(self._times[0, :n_imp].tolist()), tuple(self._ends[0, :n_imp].tolist())
         else:
             times = ends = ()
         info = {"impacts": n_imp, "impact_times": times, "impact_ends": ends,
                 "kinetic_energy": energy, "time": self._t, "distance": d,
-                "is_success": terminated}
+                "is_success": terminated, "limit": limit}
         if c.impacts:
             info["arc_impacts"] = self._count
         if terminated or truncated:
             self._done = True
+        self._in_step = False
         if self.render_mode is not None:
             self._trail.append((s[0], s[1]))
             if n_imp:
-                self._hud["impacts"].extend(self._impacts_for_render(prev, a[0], a1, times))
+                self._hud["impacts"].extend(self._impacts_for_render(prev, a[0], a1, times, elapsed))
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
         return obs[0], float(reward), terminated, truncated, info
 
-    def _impacts_for_render(self, s, a0, a1, times):
+    def _impacts_for_render(self, s, a0, a1, times, elapsed):
         """(time since reset, end, post-impact state) of the step's impacts, for the renderer's flashes: the
         step's period from its start state s rerun in the plain-Python event loop (rendering only)."""
         from ..physics.scalar import advance_through_m
@@ -272,8 +294,8 @@ class PennyEnv(gym.Env):
         p = self._p
         acc1, acc2 = (a0 * p.gain1, a1 * p.gain2) if p.n_act == 2 else \
             ((a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2))
-        _, impacts, _, _ = advance_through_m(s, acc1, acc2, p.dt, self._m)
-        t0 = self._t - p.dt
+        _, impacts, _, _ = advance_through_m(s, acc1, acc2, elapsed, self._m)
+        t0 = self._t - elapsed
         return [(t0 + t, end, post) for t, end, post in impacts[:len(times)]]
 
     # -- state access (analysis, tests) -----------------------------------------------------------

@@ -20,8 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from ..physics import PennyParams, make_law, make_table
+from ..physics.params import MAX_ANGULAR_SPEED
 from ..physics.tables import Table
-from ..physics.validation import check_actuation, check_table
+from ..physics.tables.base import LENGTH_RANGE
+from ..physics.validation import check_actuation, check_table, step_speed_limits
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 
@@ -181,6 +183,17 @@ class Scene:
             check_actuation(penny, self.torque_limits["u1"], self.torque_limits["u2"], self.control_dt)
         except ValueError as exc:
             raise ConfigError(f"{o}.{exc}") from None
+        # the initial speeds: one step at the torque limits from any of them stays within the limits
+        W_max, w_max = self.step_speed_limits()
+        for name, bound in (("theta_dot", W_max), ("phi_dot", w_max)):
+            worst = max(abs(v) for v in out[name])
+            if worst > bound:
+                raise ConfigError(f"{o}.init.{name} = {out[name]!r} rad/s: |{name}| must be <= {bound:.6g} rad/s, so that "
+                                  f"a step at the torque limits stays within MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} "
+                                  f"rad/s (and MAX_STEERED_PHASE; docs/physics.md#limits)")
+        lo_len, hi_len = LENGTH_RANGE
+        if not lo_len <= self.arena <= hi_len:  # beyond it the squared distances of the reward overflow
+            raise ConfigError(f"{o}.arena must be within [{lo_len:g}, {hi_len:g}] m, got {self.arena!r}")
         if t is not None:
             if not t.inradius > R:
                 raise ConfigError(f"{o}.table is too small for the penny: inradius {t.inradius:.4g} m <= R = {R:.4g} m")
@@ -196,6 +209,14 @@ class Scene:
             raise ConfigError(f"{o}.init.spawn_fraction must be <= 1 on the open plane, got {out['spawn_fraction']!r}")
 
     # derived objects ---------------------------------------------------------------------
+    def step_speed_limits(self) -> tuple[float, float]:
+        """(W_max, w_max): |theta_dot| and |phi_dot| beyond which a step at this scene's torque limits
+        could pass the physics' documented limits (physics.validation.step_speed_limits): the
+        initial speeds must be within them, and an episode ends, truncated, when a state passes them."""
+        u1 = self.torque_limits["u1"] if 0 in self.controls else 0.0
+        u2 = self.torque_limits["u2"] if 1 in self.controls else 0.0
+        return step_speed_limits(self.make_params(), u1, u2, self.control_dt)
+
     def make_table(self) -> Table | None:
         return make_table(dict(self.table)) if isinstance(self.table, dict) else self.table
 

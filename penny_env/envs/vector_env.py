@@ -10,7 +10,7 @@ from gymnasium.vector.utils import batch_space
 
 from ..physics.compiled import announce_compile
 from ..physics.scalar import scalar_model
-from .core import Core, check_actions, seed_keys, X, Y
+from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
 from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
@@ -68,7 +68,13 @@ class PennyVectorEnv(VectorEnv):
     ``kinetic_energy``    [J]; ``time`` [s since reset]; ``distance`` [m] to the target
     ``arc_impacts``       impacts task: running count of impacts on the marked arc
     ``is_success``        every step: the task's success condition (True only where it terminated)
+    ``limit``             (num_envs,) int8: 0, or the documented limit that truncated the env's
+                          episode (1 "speed", 2 "impacts"; PennyEnv's table)
     ====================  =========================================================================
+
+    Interrupted steps: a step interrupted by an exception (KeyboardInterrupt) may leave the
+    envs' bookkeeping half done (stepped but not marked for autoreset); the next step() then
+    raises ResetNeeded until a reset() of every env.
 
     reset options: ``reset_mask`` (num_envs,) bool, ``state`` ((6,) or (num_envs, 6)) and
     ``target`` ((2,) or (num_envs, 2)) for the envs reset (checked as PennyEnv's options).
@@ -105,7 +111,7 @@ class PennyVectorEnv(VectorEnv):
         self.autoreset_mode = autoreset_mode
         self.max_impacts_in_info = int(max_impacts_in_info)
         self.metadata = dict(self.metadata, autoreset_mode=autoreset_mode,
-                             render_fps=max(1, int(round(1.0 / self.scene.control_dt))))
+                             render_fps=render_fps(self.scene.control_dt))
         self._setup()
 
     def _setup(self):
@@ -121,6 +127,7 @@ class PennyVectorEnv(VectorEnv):
         self._S = None
         self._renderers = None
         self._true = np.ones(n, dtype=bool)
+        self._in_step = False
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -156,17 +163,21 @@ class PennyVectorEnv(VectorEnv):
         self._fns["step_envs"](S, trig, np.zeros((1, 2)), np.zeros(1, dtype=bool), np.zeros((2, 1)), np.zeros((2, 1)),
                                ints(), np.zeros(1), ints(), np.zeros(1), self._consts, obs, np.zeros(1),
                                np.zeros(1, dtype=bool), np.zeros(1, dtype=bool), ints(),
-                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8), np.zeros(1))
+                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8), np.zeros(1), np.zeros(1, dtype=np.int8))
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         """Reset all envs (or those in ``options["reset_mask"]``). seed: int (env i gets seed + i),
         a list of ints/None (one per env) or None."""
-        int_seed = isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)
-        if not (seed is None or int_seed or isinstance(seed, (list, tuple, np.ndarray))):
-            raise TypeError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {type(seed).__name__}")
-        super().reset(seed=int(seed) if int_seed else None)
         n = self.num_envs
+        int_seed = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
+        if not (seed is None or int_seed or isinstance(seed, (list, tuple, np.ndarray))):
+            raise TypeError(f"seed must be an int >= 0, None or a list of {n} seeds, got {type(seed).__name__}")
+        if int_seed:
+            seed = check_seed(seed, "seed", n)
+        elif seed is not None:
+            seed = [None if s is None else check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
+        super().reset(seed=seed if int_seed else None)
         c = self._core
         mask = self._true.copy()
         states = targets = None
@@ -180,6 +191,8 @@ class PennyVectorEnv(VectorEnv):
                     raise ValueError(f"options['reset_mask'] must have shape ({n},), got {mask.shape}")
                 if self._S is None and not mask.all():
                     raise ResetNeeded("the first reset must reset every env")
+                if self._in_step and not mask.all():
+                    raise ResetNeeded("the previous step was interrupted: reset every env (no reset_mask)")
         if self._keys is None:
             self._keys = seed_keys(self.np_random.integers(0, 2**63, size=n))
         if seed is None:
@@ -211,11 +224,12 @@ class PennyVectorEnv(VectorEnv):
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
+        self._in_step = False
         obs = np.empty((n, c.obs_dim), dtype=np.float32)  # every row: the envs outside a reset_mask keep their state
         self._fns["observe_rows"](np.arange(n), self._S, self._trig, self._target, self._count, self._consts, obs)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
-                          kinetic_energy(self._S, self._p), np.zeros(n, dtype=bool))
+                          kinetic_energy(self._S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8))
         return obs, info
 
     def _reset_envs(self, mask, states=None, targets=None):
@@ -244,6 +258,9 @@ class PennyVectorEnv(VectorEnv):
     def step(self, actions):
         if self._S is None:
             raise ResetNeeded("PennyVectorEnv.step() called before reset()")
+        if self._in_step:
+            raise ResetNeeded("PennyVectorEnv.step(): the previous step was interrupted (an exception such as "
+                              "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         n = self.num_envs
         c = self._core
         a = check_actions(actions, (n, c.n_act), "actions")  # the step clips, as PennyEnv does
@@ -258,9 +275,12 @@ class PennyVectorEnv(VectorEnv):
         times = np.empty((n, K))
         ends = np.empty((n, K), dtype=np.int8)
         energy = np.empty(n)
+        limit = np.empty(n, dtype=np.int8)
+        # from here to the autoreset flags the step's bookkeeping must run whole (class docstring)
+        self._in_step = True
         self._fns["step_envs"](self._S, self._trig, a, skip, self._target, self._arc, self._count, self._d,
                                self._steps, self._t, self._consts, obs, rew, term, trunc, n_imp,
-                               times, ends, energy)
+                               times, ends, energy, limit)
         self._extend_trails()
         done = term | trunc
         if next_step and skip.any():  # the envs whose episode ended at the previous step reset now
@@ -268,11 +288,12 @@ class PennyVectorEnv(VectorEnv):
             rows = self._reset_envs(skip)
             self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._consts, obs)
             energy[rows] = kinetic_energy(self._S[:, rows], self._p)
-        info = self._info(n_imp, times, ends, energy, term)
+        info = self._info(n_imp, times, ends, energy, term, limit)
         if next_step:
             self._autoreset = done
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             self._end_episodes_same_step(info, obs, done, term)
+        self._in_step = False
         return obs, rew, term, trunc, info
 
     def _end_episodes_same_step(self, info, obs, done, terminated):
@@ -297,12 +318,13 @@ class PennyVectorEnv(VectorEnv):
                 self._trails[i].append((self._S[X, i], self._S[Y, i]))
                 del self._trails[i][:-200]
 
-    def _info(self, counts, times, ends, energy, success):
+    def _info(self, counts, times, ends, energy, success, limit):
         t = self._true
         info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
                 "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": energy,
                 "_kinetic_energy": t.copy(), "time": self._t.copy(), "_time": t.copy(), "distance": self._d.copy(),
-                "_distance": t.copy(), "is_success": success.copy(), "_is_success": t.copy()}
+                "_distance": t.copy(), "is_success": success.copy(), "_is_success": t.copy(),
+                "limit": limit, "_limit": t.copy()}
         if self._core.impacts:
             info["arc_impacts"] = self._count.copy()
             info["_arc_impacts"] = t.copy()

@@ -20,14 +20,19 @@ Every law moves v along the metric gradient of n, v+ = v - k (a / (I + m R^2), b
   for I > m R^2 head-on or J > m R^2 sideways. The simulator then removes the normal velocity
   (the e = 0 law), the limit of re-applying the plastic map at the same instant. Energy never increases.
 
-Laws are an open registry: a law is one function ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)``
-of the normal form (plain math, so that numba compiles it into the event loop), registered by name
-with :func:`register_law` (see docs/extending.md); ``make_law(name)`` then finds it.
+Laws are an open registry: a law is a :class:`LawRecord`, whose map is one function
+``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)`` of the normal form (plain math, so that
+numba compiles it into the event loop), with its Jacobian (or None) and whether it conserves the
+kinetic energy, registered by name with :func:`register_law` (see docs/extending.md);
+``make_law(name)`` then finds it. The derivatives (physics/sensitivity.py) use the record's Jacobian
+and refuse (jacobian_valid False, with the reason) a law that has none; the event loop's Zeno rule
+(physics/scalar.py) reads conserves_energy.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -45,20 +50,55 @@ def plastic_update(W, w, a, b, grad2, e, Itot, J, m):
     return law_update(W, w, a, b, grad2, e, True, Itot, J, m, SCALAR)
 
 
-LAW_KINDS: dict = {}      # name -> (update, default e)
+def restitution_jacobian(W, w, a, b, grad2, e, Itot, J, m):
+    """(W+, w+) of restitution_update and its 2 x 5 Jacobian w.r.t. (W, w, a, b, grad2)."""
+    from .sensitivity import law_jacobian
+    return law_jacobian(W, w, a, b, grad2, e, False, Itot, J, m)
+
+
+def plastic_jacobian(W, w, a, b, grad2, e, Itot, J, m):
+    """(W+, w+) of plastic_update and its 2 x 5 Jacobian (its sticking rule's branch included)."""
+    from .sensitivity import law_jacobian
+    return law_jacobian(W, w, a, b, grad2, e, True, Itot, J, m)
+
+
+@dataclass(frozen=True)
+class LawRecord:
+    """A registered impact law: its map ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)``, the
+    coefficient e it receives by default, its Jacobian ``jacobian(same arguments) -> ((W+, w+), D)``
+    with D the 2 x 5 derivative of (W+, w+) w.r.t. (W, w, a, b, grad2), or None (then no derivative
+    through its impacts exists: simulate(..., sensitivities=True) says so), and whether it conserves
+    the kinetic energy (then an accumulation of impacts never brings the penny to rest)."""
+
+    name: str
+    update: Callable
+    e: float = 1.0
+    jacobian: Callable | None = None
+    conserves_energy: bool = False
+
+
+LAW_KINDS: dict = {}      # name -> LawRecord
 COMPILED_LAWS: list = []  # the distinct update functions; Model.law indexes it
 
 
-def register_law(name: str, update, e: float = 1.0) -> None:
+def register_law(name: str, update, e: float = 1.0, *, jacobian=None, conserves_energy: bool = False) -> None:
     """Make ``make_law(name)`` the law whose post-impact velocities are ``update(W, w, a, b, grad2, e,
     Itot, J, m) -> (W+, w+)`` (W, w: theta_dot, phi_dot before; n = a W + b w the end's outward normal
     velocity, grad2 = |grad h|^2; Itot = I + m R^2). ``update`` must be plain math (numba compiles it
-    into the event loop) and must not increase the kinetic energy; e is the coefficient it receives."""
+    into the event loop) and must not increase the kinetic energy; e is the coefficient it receives.
+    jacobian: ``jacobian(W, w, a, b, grad2, e, Itot, J, m) -> ((W+, w+), D)`` (D: 2 x 5, derivatives
+    w.r.t. (W, w, a, b, grad2)) for the sensitivities, or None (they then report jacobian_valid
+    False). conserves_energy: True only for a law that keeps the kinetic energy exactly (the event
+    loop then never stops an accumulation of impacts)."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"register_law: name must be an identifier, got {name!r}")
     if not callable(update):
         raise TypeError("register_law: update must be a function")
-    LAW_KINDS[name] = (update, float(e))
+    if jacobian is not None and not callable(jacobian):
+        raise TypeError("register_law: jacobian must be a function or None")
+    if not isinstance(conserves_energy, bool):
+        raise TypeError(f"register_law: conserves_energy must be a bool, got {type(conserves_energy).__name__}")
+    LAW_KINDS[name] = LawRecord(name, update, float(e), jacobian, conserves_energy)
     if law_index(update) < 0:
         COMPILED_LAWS.append(update)
 
@@ -71,9 +111,9 @@ def law_index(update) -> int:
     return -1
 
 
-register_law("elastic", restitution_update, 1.0)
-register_law("restitution", restitution_update, 1.0)
-register_law("plastic", plastic_update, 0.0)
+register_law("elastic", restitution_update, 1.0, jacobian=restitution_jacobian, conserves_energy=True)
+register_law("restitution", restitution_update, 1.0, jacobian=restitution_jacobian)  # (e = 1 is "elastic")
+register_law("plastic", plastic_update, 0.0, jacobian=plastic_jacobian)
 
 
 @dataclass(frozen=True)
@@ -87,9 +127,19 @@ class ImpactLaw:
         return self.kind if self.kind != "restitution" else f"restitution(e={self.e:g})"
 
     @property
+    def record(self) -> LawRecord:
+        """The law's registered LawRecord."""
+        return LAW_KINDS[self.kind]
+
+    @property
     def update(self):
         """The law's registered update function."""
-        return LAW_KINDS[self.kind][0]
+        return self.record.update
+
+    @property
+    def conserves_energy(self) -> bool:
+        """The record's conserves_energy (restitution with e = 1 too, however it was built)."""
+        return self.record.conserves_energy or (self.record.update is restitution_update and self.e == 1.0)
 
 
 def make_law(law) -> ImpactLaw:
@@ -103,7 +153,7 @@ def make_law(law) -> ImpactLaw:
         if key == "plastic":
             return ImpactLaw("plastic", 0.0)
         if key in LAW_KINDS and key != "restitution":
-            return ImpactLaw(key, LAW_KINDS[key][1])
+            return ImpactLaw(key, LAW_KINDS[key].e)
         raise ValueError(f"law must be one of {sorted(k for k in LAW_KINDS if k != 'restitution')} or a restitution "
                          f"coefficient in [0, 1], got {law!r}")
     if isinstance(law, bool) or not isinstance(law, (int, float, np.integer, np.floating)):

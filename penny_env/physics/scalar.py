@@ -152,7 +152,7 @@ def _build_model(params, table, law, settings):
         third, D3, jump = third_order(table)
         G, L, delta = float(table.grad_bound), float(table.hessian_bound), settings.contact_tol * table.size
     return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta,
-                 float(law.e), law_index(law.update), law.kind == "elastic", int(settings.max_search_steps), int(settings.zeno_impacts),
+                 float(law.e), law_index(law.update), law.conserves_energy, int(settings.max_search_steps), int(settings.zeno_impacts),
                  float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
 

@@ -213,8 +213,13 @@ def impact_linearisation(pre, sigma, params, table, law):
     db = sigma * R * (c * dh[1] - sn * dh[0])
     db[2] += sigma * R * (-hy * sn - hx * c)
     dg2 = 2.0 * (hx * dh[0] + hy * dh[1])
-    (Wp, wp), L = law_jacobian(pre[THETA_DOT], pre[PHI_DOT], a, b, grad2, law.e, law.kind == "plastic",
-                               params.rolling_inertia, params.J, params.m)
+    jacobian = law.record.jacobian
+    if jacobian is None:  # (trajectory_jacobians reports it: jacobian_valid False)
+        Wp, wp = law.update(pre[THETA_DOT], pre[PHI_DOT], a, b, grad2, law.e, params.rolling_inertia, params.J, params.m)
+        L = np.full((2, 5), np.nan)
+    else:
+        (Wp, wp), L = jacobian(pre[THETA_DOT], pre[PHI_DOT], a, b, grad2, law.e, params.rolling_inertia, params.J,
+                               params.m)
     # chain: (W, w, a, b, grad2) as functions of the state (x, y, phi, W, w)
     inner = np.zeros((5, 6))
     inner[0, THETA_DOT] = 1.0
@@ -251,6 +256,9 @@ def trajectory_jacobians(traj, table, law, controls=None, n_impacts=None, t_fina
     if traj.rest_times.size:
         invalid.append(f"a Zeno accumulation brought the penny to rest at t={traj.rest_times[0]:.6g} s "
                        "(its velocity is reset to zero: no derivative)")
+    if traj.n_impacts and law.record.jacobian is None:
+        invalid.append(f"the impact law {law.kind!r} was registered without a Jacobian (register_law(..., "
+                       "jacobian=...)): no derivative through its impacts")
     if not traj.complete and n_impacts is not None and t_final is None:
         invalid.append("the run stopped before its n_impacts at a time set by the state itself "
                        "(complete=False without t_final): no derivative at a fixed time")

@@ -151,6 +151,19 @@ def check_actuation(params: PennyParams, u1_max: float, u2_max: float, control_d
                          f"the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad")
 
 
+def step_speed_limits(params: PennyParams, u1_max: float, u2_max: float, control_dt: float) -> tuple[float, float]:
+    """(W_max, w_max): the largest |theta_dot| and |phi_dot| from which one environment step at the
+    torque limits stays within the documented limits (MAX_ANGULAR_SPEED for both speeds, and
+    MAX_STEERED_PHASE of heading swept when there is a steering torque). The environments check a
+    scene's initial speeds against them and end an episode, truncated, once a state passes them
+    (envs/functional.py), so every step they run is one the physics accepts. u1_max = 0: no steering
+    torque (the heading's phase is then not limited: the flow is in closed form)."""
+    W_max = MAX_ANGULAR_SPEED - u2_max * control_dt / params.rolling_inertia
+    w_reach = MAX_ANGULAR_SPEED if u1_max == 0.0 else min(MAX_ANGULAR_SPEED, MAX_STEERED_PHASE / control_dt)
+    w_max = w_reach - u1_max * control_dt / params.J
+    return W_max, w_max
+
+
 def check_settings(settings) -> SolverSettings:
     if settings is None:
         return DEFAULT_SETTINGS

@@ -1,0 +1,168 @@
+"""Which committed reports are older than the code that makes them.
+
+    python -m penny_env.analysis.provenance --check            # list stale reports, exit 1 if any
+    python -m penny_env.analysis.provenance --stamp docs/X.md --reason "..."   # accept without a rerun
+
+Rule: every report in docs/ records, in its header, a hash of its **sources**: its own command's
+module and the modules whose code computes its numbers (the physics or env step it measures, the
+presets it runs), listed explicitly in :data:`REPORTS` (small on purpose: the helpers of formatting
+and plotting are left out). The hash is SHA-256 over each source file's repository path and bytes,
+in the listed order, so any edit of a listed file makes the report stale. A report's command writes
+the line itself (common.header calls :func:`stamp_line`); ``--check`` (and tests/test_provenance.py)
+compare it with the current sources and name the command that regenerates each stale report.
+
+``--stamp REPORT --reason TEXT`` records the current hash in a report **without** rerunning it, with
+the date and the reason in the line itself, for reports whose command takes hours (docs/study.md,
+docs/optimal_control.md) after one has checked that the changes do not reach its numbers. The
+reason stays visible in the report.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import hashlib
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]  # the repository (or source tree) root
+
+_PHYSICS = ("penny_env/physics/scalar.py", "penny_env/physics/flows.py", "penny_env/physics/kernels.py",
+            "penny_env/physics/laws.py", "penny_env/physics/params.py", "penny_env/physics/simulation.py")
+_TABLES = ("penny_env/physics/tables/base.py", "penny_env/physics/tables/ellipse.py",
+           "penny_env/physics/tables/stadium.py", "penny_env/physics/tables/rounded_rectangle.py")
+_ENV = ("penny_env/envs/functional.py", "penny_env/envs/core.py", "penny_env/envs/tasks.py",
+        "penny_env/envs/scene.py", "penny_env/presets/envs.yaml", "penny_env/presets/scenes/ellipse.yaml",
+        "penny_env/presets/scenes/circle.yaml", "penny_env/presets/scenes/stadium.yaml",
+        "penny_env/presets/scenes/plane.yaml", "penny_env/presets/scenes/rounded_rectangle.yaml")
+
+# report -> (the command that regenerates it, run from the repository root; its sources)
+REPORTS = {
+    "docs/bench_solvers.md": ("python -m penny_env.analysis.bench_solvers --out docs/bench_solvers.md",
+                              ("penny_env/analysis/bench_solvers.py", "penny_env/analysis/integrators.py",
+                               "penny_env/analysis/matching.py", "penny_env/analysis/reference.py") + _PHYSICS + _TABLES),
+    "docs/work_precision.md": ("python -m penny_env.analysis.work_precision --out docs/work_precision.md",
+                               ("penny_env/analysis/work_precision.py", "penny_env/analysis/integrators.py",
+                                "penny_env/analysis/reference.py") + _PHYSICS + _TABLES),
+    "docs/stability.md": ("python -m penny_env.analysis.stability --out docs/stability.md",
+                          ("penny_env/analysis/stability.py", "penny_env/physics/pennies.py",
+                           "penny_env/physics/validation.py") + _PHYSICS + _TABLES),
+    "docs/throughput.md": ("python -m penny_env.analysis.throughput --out docs/throughput.md --readme README.md",
+                           ("penny_env/analysis/throughput.py", "penny_env/envs/penny_env.py",
+                            "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
+    "docs/baselines.md": ("python -m training.baselines --out docs/baselines.md",
+                          ("training/baselines.py",) + _ENV + _PHYSICS + _TABLES),
+    "docs/paper_figures.md": ("python -m penny_env.analysis.paper_figures --out docs/paper_figures.md",
+                              ("penny_env/analysis/paper_figures.py", "penny_env/batch.py") + _PHYSICS + _TABLES),
+    "docs/dynamics.md": ("python -m penny_env.analysis.dynamics --out docs/dynamics.md",
+                         ("penny_env/analysis/dynamics.py", "penny_env/batch.py") + _PHYSICS + _TABLES),
+    "docs/controllability.md": ("python -m penny_env.analysis.controllability --out docs/controllability.md",
+                                ("penny_env/analysis/controllability.py", "penny_env/analysis/dynamics.py",
+                                 "penny_env/batch.py") + _PHYSICS + _TABLES),
+    "docs/study.md": ("python -m training.study --config configs/study/large.yaml",
+                      ("training/study.py", "training/study_report.py", "configs/study/large.yaml") + _ENV + _PHYSICS
+                      + _TABLES),
+    "docs/optimal_control.md": ("python -m training.optimal_control --workers 2",
+                                ("training/optimal_control.py", "training/shooting.py", "training/optimal_vs_rl.py",
+                                 "penny_env/physics/sensitivity.py") + _PHYSICS + _TABLES),
+    # the comparison of two source trees: its numbers come from the trees it names, so only its own
+    # module makes it stale
+    "docs/throughput_compare.md": ("python -m penny_env.analysis.throughput_compare --before OLD --after NEW "
+                                   "--out docs/throughput_compare.md", ("penny_env/analysis/throughput_compare.py",)),
+}
+# the command modules whose header writes the line (common.header's module argument -> report)
+MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
+                  "penny_env.analysis.work_precision": "docs/work_precision.md",
+                  "penny_env.analysis.stability": "docs/stability.md",
+                  "penny_env.analysis.throughput": "docs/throughput.md",
+                  "training.baselines": "docs/baselines.md",
+                  "penny_env.analysis.paper_figures": "docs/paper_figures.md",
+                  "penny_env.analysis.dynamics": "docs/dynamics.md",
+                  "penny_env.analysis.controllability": "docs/controllability.md",
+                  "training.study": "docs/study.md",
+                  "training.optimal_control": "docs/optimal_control.md",
+                  "penny_env.analysis.throughput_compare": "docs/throughput_compare.md"}
+
+PREFIX = "- sources: sha256 "
+_LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")
+
+
+def sources_hash(report: str, root: Path = ROOT) -> str:
+    """The first 16 hex digits of SHA-256 over the report's sources (path and bytes, in order)."""
+    h = hashlib.sha256()
+    for rel in REPORTS[report][1]:
+        h.update(rel.encode() + b"\0")
+        h.update((root / rel).read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def stamp_line(report: str, reason: str | None = None, root: Path = ROOT) -> str:
+    """The header line of a report: its sources' hash, and where it was stamped without a rerun, why."""
+    files = ", ".join(Path(p).name for p in REPORTS[report][1])
+    line = f"{PREFIX}{sources_hash(report, root)} of {files} (python -m penny_env.analysis.provenance --check)"
+    if reason:
+        line += f"; stamped {_dt.date.today().isoformat()} without a rerun: {reason}"
+    return line
+
+
+def recorded_hash(path: Path) -> str | None:
+    """The hash a report file records, or None."""
+    if not path.exists():
+        return None
+    for line in path.read_text().splitlines()[:30]:
+        m = _LINE.match(line)
+        if m:
+            return m.group(1)
+    return None
+
+
+def stale(root: Path = ROOT) -> list[tuple[str, str]]:
+    """(report, why) of every report whose recorded hash is missing or not its sources' hash now."""
+    out = []
+    for report in REPORTS:
+        got = recorded_hash(root / report)
+        if got is None:
+            out.append((report, "records no sources hash"))
+        elif got != sources_hash(report, root):
+            out.append((report, f"made from other sources (recorded {got}, now {sources_hash(report, root)})"))
+    return out
+
+
+def stamp(report: str, reason: str, root: Path = ROOT) -> None:
+    """Write the current sources hash into a report without rerunning it (after the header's command line)."""
+    if not reason or not reason.strip():
+        raise ValueError("--reason is required: say why the report's numbers hold for the current sources")
+    path = root / report
+    lines = path.read_text().splitlines()
+    new = stamp_line(report, reason.strip(), root)
+    for i, line in enumerate(lines[:30]):
+        if line.startswith(PREFIX):
+            lines[i] = new
+            break
+    else:
+        at = next((i for i, line in enumerate(lines[:30]) if line.startswith(("- command", "- commands"))), 1)
+        lines.insert(at + 1, new)
+    path.write_text("\n".join(lines).rstrip() + "\n")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--check", action="store_true", help="list the stale reports with their commands; exit 1 if any")
+    ap.add_argument("--stamp", metavar="REPORT", choices=sorted(REPORTS), help="record the current hash without a rerun")
+    ap.add_argument("--reason", help="with --stamp: why the report's numbers hold for the current sources")
+    args = ap.parse_args(argv)
+    if args.stamp:
+        stamp(args.stamp, args.reason or "")
+        print(f"{args.stamp}: stamped {sources_hash(args.stamp)}")
+        return 0
+    bad = stale()
+    for report, why in bad:
+        print(f"STALE {report}: {why}; regenerate: {REPORTS[report][0]}")
+    if not bad:
+        print(f"all {len(REPORTS)} reports match their sources")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
