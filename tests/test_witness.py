@@ -68,6 +68,9 @@ def test_witness_command_prints_the_count(capsys):
     (["PennyProbeNothing-Plane-v0"], "PennyProbeNothing-Plane-v0"),
     (["PennyProbeSteer-Plane-v0", "--pairs", "0"], "--pairs"),
     (["PennyProbeSteer-Plane-v0", "--pairs", "-3"], "--pairs"),
+    (["PennyProbeSteer-Plane-v0", "--pairs", "two"], "--pairs"),
+    (["PennyProbeSteer-Plane-v0", "--seed", "-1"], "--seed"),
+    (["PennyProbeSteer-Plane-v0", "--workers", "0"], "--workers"),
     (["PennyProbeSteer-Plane-v0", "law=sticky"], "law"),
     (["PennyProbeSteer-Plane-v0", "law=1.5"], "law"),
     (["PennyProbeSteer-Plane-v0", "table=hexagon"], "hexagon"),
@@ -205,3 +208,17 @@ def test_readme_answer_is_the_verdict_tables():
     # every probe x table x law cell was run
     keys = {(c["probe"], c["table"], c["law"]) for c in cells}
     assert keys == set(ws.all_cells())
+
+
+@pytest.mark.parametrize("argv, names", [(["--pairs", "0"], "--pairs"), (["--workers", "-1"], "--workers"),
+                                          (["--theorem-pairs", "0"], "--theorem-pairs")])
+def test_witness_study_bad_input_names_it(argv, names, capsys):
+    with pytest.raises(SystemExit) as exc:
+        ws.main(argv)
+    assert exc.value.code == 2 and names in capsys.readouterr().err
+
+
+def test_witness_study_report_only_needs_its_csvs(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        ws.main(["--report-only", "--out-dir", str(tmp_path)])
+    assert "witnesses.csv" in capsys.readouterr().err

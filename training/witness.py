@@ -311,14 +311,17 @@ def _cell_chunk(args):
     return res
 
 
-def positive_int(name):
+def positive_int(name, least=1):
+    """argparse type: an integer >= least (1: positive), the error naming the option."""
+    kind = "a positive integer" if least == 1 else f"an integer >= {least}"
+
     def parse(text):
         try:
             v = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a positive integer, got {text!r}") from None
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{name} must be a positive integer, got {v}")
+            raise argparse.ArgumentTypeError(f"{name} must be {kind}, got {text!r}") from None
+        if v < least:
+            raise argparse.ArgumentTypeError(f"{name} must be {kind}, got {v}")
         return v
     return parse
 
@@ -328,7 +331,7 @@ def main(argv=None) -> int:
     ap.add_argument("env_id", metavar="ENV_ID", help="a probe id, PennyProbe{Steer,Drive,Both}-*-v0")
     ap.add_argument("overrides", nargs="*", metavar="field=value", help="field overrides (table=circle, law=plastic)")
     ap.add_argument("--pairs", type=positive_int("--pairs"), default=20, help="start/target pairs (seeds S .. S+N-1)")
-    ap.add_argument("--seed", type=int, default=0, help="first pair's seed")
+    ap.add_argument("--seed", type=positive_int("--seed", 0), default=0, help="first pair's seed")
     ap.add_argument("--workers", type=positive_int("--workers"), default=1, help="processes")
     args = ap.parse_intermixed_args(argv)
     try:

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from training.study_report import clopper_pearson
 from training.verdict import ANCHORS, CONTEXT, THEORY_DOC, cell_verdict, learnability, theorem_of
 from training.witness import PROBES, Witness, positive_int
 
@@ -110,7 +111,6 @@ def run_cells(cells, pairs, seed, workers, theorem_pairs=None):
 
 
 def cell_rows(pair_rows, seconds):
-    from training.study_report import clopper_pearson
     cells = {}
     for r in pair_rows:
         cells.setdefault((r["probe"], r["table"], r["law"]), []).append(r)
@@ -199,7 +199,7 @@ def learn_rows(cells, rl):
         k, N = int(c["witnessed"]), int(c["pairs"])
         le = learnability(s, n, k, N)
         if le is None:
-            rate, (lo, hi) = s / n, _cp(s, n)
+            rate, (lo, hi) = s / n, clopper_pearson(s, n)
             share = "- (nothing witnessed)"
         else:
             rate, (lo, hi), sh, (slo, shi) = le
@@ -207,11 +207,6 @@ def learn_rows(cells, rl):
         lines.append(f"| {PROBE_TASKS[c['probe']]} | {TABLE_NAMES[c['table']]} | {c['law']} | {k}/{N} | "
                      f"{agent} {s}/{n} = {rate:.3f} [{lo:.4f}, {hi:.4f}] | {share} |")
     return lines
-
-
-def _cp(k, n):
-    from training.study_report import clopper_pearson
-    return clopper_pearson(k, n)
 
 
 def failures(pair_rows):
@@ -240,37 +235,55 @@ def summary(cells):
 
 
 def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
-    """The README's answer, computed from the verdict table (never typed)."""
-    parts = []
+    """The README's answer, computed from the verdict table and the RL study's rows (never typed): a grid of
+    the verdicts (per table, the laws' k/N), then per actuation the range of witnessed shares and the RL
+    agents' learnability."""
+    by = {_key(c): c for c in cells}
+    law_names = " · ".join(LAWS[law].lower() if law != "0.5" else "e = 0.5" for law in LAWS)
+    lines = [f"Answer from theorems and certified witness episodes ([{report}]({report}); theory: "
+             f"[docs/{THEORY_DOC}](docs/{THEORY_DOC})). Per table: **impossible (theorem)**, or the pairs witnessed "
+             f"k/N per law ({law_names}; the plane has no walls, one run for every law), **open** where none was:", "",
+             "| actuation | " + " | ".join(TABLE_NAMES[t] for t in TABLES) + " |",
+             "| --- |" + " --- |" * len(TABLES)]
+    for probe in PROBES:
+        row = []
+        for t in TABLES:
+            cs = [by.get((probe, t, "-" if t == "plane" else law)) for law in (("-",) if t == "plane" else LAWS)]
+            if any(c is None for c in cs):
+                row.append("not run")
+            elif cs[0]["verdict"].startswith("impossible"):
+                thm = theorem_of(probe, t)[0]
+                row.append(f"**impossible** (theorem {thm})")
+            else:
+                row.append(" · ".join("open" if c["verdict"] == "open" else f"{c['witnessed']}/{c['pairs']}"
+                                      for c in cs))
+        lines.append(f"| {PROBE_TASKS[probe]} | " + " | ".join(row) + " |")
+    lines.append("")
+    sentences = []
     for probe, (imp, wit, opn) in summary(cells).items():
         bits = []
-        if imp:
-            thm = theorem_of(probe, imp[0]["table"])[0]
-            bits.append(f"impossible on the open plane (theorem {thm})")
         if wit:
             rates = [int(c["witnessed"]) / int(c["pairs"]) for c in wit]
-            walled = sorted({TABLE_NAMES[c["table"]] for c in wit if c["table"] != "plane"})
-            where = "every table and law tried" if walled and len(walled) == len(TABLES) - 1 and \
-                len([c for c in wit if c["table"] != "plane"]) == (len(TABLES) - 1) * len(LAWS) else \
-                ", ".join(walled) or "the plane"
-            plane = any(c["table"] == "plane" for c in wit)
-            bits.append(f"possible {'on the plane and ' if plane else 'on '}{where}, witnessed in "
-                        f"{min(rates):.0%} to {max(rates):.0%} of the pairs per cell")
+            low = min(clopper_pearson(int(c["witnessed"]), int(c["pairs"]))[0] for c in wit)
+            bits.append(f"possible in {len(wit)} cells, witnessed in {min(rates):.0%} to {max(rates):.0%} of the "
+                        f"pairs per cell (lowest exact 95 % lower bound {low:.2f})")
         if opn:
-            bits.append("open in " + ", ".join(f"{TABLE_NAMES[c['table']]}/{c['law']}" for c in opn))
-        le = []
+            bits.append(f"open in {len(opn)} cells")
+        shares, succ = [], []
         for c in wit:
-            key = _key(c)
-            if key in rl:
-                agent, s, n = rl[key]
-                res = learnability(s, n, int(c["witnessed"]), int(c["pairs"]))
-                le.append(res[2])
-        rl_txt = (f"; the RL study's best agents reach {min(le):.2f} to {max(le):.2f} of the witnessed rate on "
-                  f"its {len(le)} such cells" if le else "")
-        parts.append(f"**{PROBE_TASKS[probe]}**: " + "; ".join(bits) + rl_txt + ".")
-    return (f"Answer from theorems and certified witness episodes ([{report}]({report}), theory in "
-            f"[docs/{THEORY_DOC}](docs/{THEORY_DOC})): " + " ".join(parts)
-            + " RL success rates are learnability, not the verdict: see the report's table (exact intervals).")
+            if _key(c) in rl:
+                agent, k, n = rl[_key(c)]
+                shares.append(learnability(k, n, int(c["witnessed"]), int(c["pairs"]))[2])
+                succ.append((k, n))
+        if shares:
+            bits.append(f"the RL study's best agents (PPO/SAC) reach {min(shares):.2f} to {max(shares):.2f} of the "
+                        f"witnessed rate on the {len(shares)} of these cells it trained on"
+                        + (f" (0 successes in each: exact 95 % upper bounds up to "
+                           f"{max(clopper_pearson(k, n)[1] for k, n in succ):.4f})" if not any(k for k, _ in succ) else ""))
+        if bits:
+            sentences.append(f"**{PROBE_TASKS[probe]}**: " + "; ".join(bits) + ".")
+    lines.append(" ".join(sentences) + " The RL rates are learnability, not the verdict.")
+    return "\n".join(lines)
 
 
 def update_readme(readme: Path, answer: str) -> bool:
@@ -332,7 +345,9 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
               "per candidate, the compiled step), and the first candidate that succeeds is run as a controller in "
               "the real episode (gymnasium.make of the id, reset with the pair's seed): the pair counts only if "
               "that episode ends with `is_success`. `python -m training.witness ENV_ID [--pairs N] [field=value ...]` "
-              "runs one cell.", ""]
+              "runs one cell. A pair the family does not solve is not shown impossible (the family is small and "
+              "the search stops at its first success): the witnessed share is a lower bound of the solvable share "
+              "of the probe's start/target distribution, and only a theorem says impossible.", ""]
     out.write_text("\n".join(x for x in lines if x is not None))
 
 
@@ -341,7 +356,7 @@ def main(argv=None):
     ap.add_argument("--pairs", type=positive_int("--pairs"), default=30, help="start/target pairs per cell")
     ap.add_argument("--theorem-pairs", type=positive_int("--theorem-pairs"), default=5,
                     help="pairs in the cells a theorem declares impossible (a consistency check)")
-    ap.add_argument("--seed", type=int, default=0, help="first pair's seed")
+    ap.add_argument("--seed", type=positive_int("--seed", 0), default=0, help="first pair's seed")
     ap.add_argument("--workers", type=positive_int("--workers"), default=2, help="processes")
     ap.add_argument("--quick", action="store_true", help="3 cells, 2 pairs, into --out-dir (never docs/)")
     ap.add_argument("--out-dir", type=Path, default=None, help="report folder (default docs/; --quick: a new "
