@@ -48,6 +48,18 @@ def test_witness_episode_is_a_success_of_the_real_env(env_id, overrides):
     assert ok and steps == r.steps == len(r.actions)
 
 
+def test_real_episode_gets_the_searched_actions_bitwise():
+    """The search runs float64 actions on the vector env; the real episode must get the same (a float32 cast
+    changed the torques' last bits, and on the elastic ellipse this pair's episode missed the target)."""
+    w = wt.Witness("PennyProbeSteer-Ellipse-Elastic-v0")
+    try:
+        r = w.pair(27)
+    finally:
+        w.close()
+    assert r.witnessed, r.reason
+    assert all(a.dtype == np.float64 for a in r.actions)
+
+
 def test_witness_on_the_plane_fails_with_the_theorem_as_reason():
     w = wt.Witness("PennyProbeDrive-Plane-v0")
     try:

@@ -265,8 +265,8 @@ class Witness:
         params = self.cands[idx:idx + 1]
         ok, steps, n_imp, actions = run_episode(env, self.family(self.core, params), seed)
         if not ok:
-            return PairResult(seed, False, f"the searched candidate {tuple(params[0])} failed in the real episode",
-                              steps, n_imp, tuple(params[0].tolist()))
+            return PairResult(seed, False, f"the searched candidate {tuple(params[0].tolist())} failed in the real "
+                              "episode", steps, n_imp, tuple(params[0].tolist()))
         return PairResult(seed, True, "", steps, n_imp, tuple(params[0].tolist()), actions)
 
 
@@ -277,7 +277,9 @@ def run_episode(env, ctrl, seed):
     impacts = np.zeros(1, np.int64)
     n_imp, actions = 0, []
     for step in range(1, 10 ** 6):
-        a = _act(ctrl, u.state[None, :], u.target[None, :], impacts, obs[None, :])[0].astype(np.float32)
+        # float64, as the search's vector env got them (a float32 cast changes the torques' last bits, and on a
+        # chaotic table the episode)
+        a = _act(ctrl, u.state[None, :], u.target[None, :], impacts, obs[None, :])[0]
         actions.append(a)
         obs, _, term, trunc, info = env.step(a)
         impacts = np.array([info["impacts"]], np.int64)

@@ -106,8 +106,13 @@ def run_cells(cells, pairs, seed, workers, theorem_pairs=None):
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(workers) as ex:
             collect(ex.map(_run_chunk, tasks))
-    rows.sort(key=lambda r: (PROBES.index(r["probe"]), TABLES.index(r["table"]), r["law"], r["seed"]))
+    rows.sort(key=lambda r: (*_order(r), r["seed"]))
     return rows, seconds
+
+
+def _order(r):
+    """Sort key of a cell: probe, table, law in PROBES, TABLES, LAWS order."""
+    return PROBES.index(r["probe"]), TABLES.index(r["table"]), list(LAWS).index(r["law"]) if r["law"] in LAWS else -1
 
 
 def cell_rows(pair_rows, seconds):
@@ -300,7 +305,7 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
     from penny_env.analysis.common import machine_lines
     lines = ["# Which actuations and walls make the penny controllable: theorems and certified witnesses", "",
              *meta["machine"], f"- command: `{meta['command']}` ({meta['wall_s']:.0f} s wall, "
-             f"{sum(float(c['seconds']) for c in cells):.0f} s CPU in the witness searches, on {meta['date']})",
+             f"{sum(float(c['seconds']) for c in cells):.0f} s CPU in the witness searches, finished {meta['date']})",
              f"- pairs per cell: N = {meta.get('pairs', '?')}; in the cells a theorem declares impossible "
              f"{meta.get('theorem_pairs', '?')} (a check that no episode contradicts it: the search runs every "
              "candidate to the time limit there)",
@@ -394,6 +399,7 @@ def main(argv=None):
         write_csv(cells_csv, cells, CELL_FIELDS)
         write_csv(pairs_csv, pair_rows, PAIR_FIELDS)
         meta_json.write_text(json.dumps(meta, indent=1))
+    cells.sort(key=_order)
     for c in cells:  # the verdict recomputed from the counts (a CSV edited by hand cannot carry another)
         c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]))
     rl = study_rl(args.study_csv)
