@@ -114,6 +114,10 @@ def test_wilson_interval():
     assert lo == pytest.approx(1 - hi) and lo < 0.5 < hi
 
 
+def _row(table, agent, s, lo, hi):
+    return {"table": table, "agent": agent, "success": s, "ci_low": lo, "ci_high": hi}
+
+
 def test_last_quarter_change_interpolates():
     from training.study_report import last_quarter_change
     curve = [[0, 0.0], [100, 0.2], [200, 0.4], [300, 0.6], [400, 1.0]]
