@@ -287,13 +287,12 @@ def main(argv=None):
     if todo:
         (_ray if args.ray else _pool)(todo, runs, args.workers)
     from training.study_report import write_report
-    rows = write_report(cfg, jobs, runs, out, argv=argv if argv is not None else sys.argv[1:],
-                        seconds=time.perf_counter() - t0)
+    write_report(cfg, jobs, runs, out, argv=argv if argv is not None else sys.argv[1:],
+                 seconds=time.perf_counter() - t0)
     print(f"report: {out}")
-    if out.resolve() == (ROOT / "docs" / "study.md").resolve():  # the committed report: the README's answer follows it
-        from training.study_report import readme_answer, update_readme
-        if update_readme(ROOT / "README.md", readme_answer(rows)):
-            print("README.md: the answer updated from the report")
+    if out.resolve() == (ROOT / "docs" / "study.md").resolve():
+        print("the README's answer (learnability beside the verdicts) follows docs/study.csv: "
+              "rerun python -m training.witness_study --report-only to update it")
     return out
 
 

@@ -1,10 +1,12 @@
 """The study's report from the jobs' result files: per (cell, agent) statistics with 95 %
-intervals, learning curves with bands (PNG), a verdict per probe computed from the intervals,
-and the proven facts kept apart from the observations.
+intervals, learning curves with bands (PNG), and the proven facts kept apart from the observations.
+The answer to "which actuations and walls make the penny controllable" is not computed here: it is
+the verdict table of training/witness_study.py (theorems and certified witnesses, docs/witnesses.md);
+the RL rates of this report appear beside it as learnability.
 
-Interval method: a two-level (hierarchical) percentile bootstrap, 2000 resamples, fixed rng seed:
-resample the seeds with replacement, then the evaluation episodes within each drawn seed; the
-statistic is the mean over all drawn episodes. Learning-curve bands: percentile bootstrap over seeds.
+Interval method (success rates): clustered by seed, :func:`seed_clustered_ci` (a t interval over the
+seed means, widened to the pooled exact Clopper-Pearson interval so that it is honest at 0 and at 1).
+Learning-curve bands: percentile bootstrap over seeds.
 """
 from __future__ import annotations
 
@@ -22,16 +24,45 @@ ROW_FIELDS = ["probe", "table", "cell", "agent", "seeds", "episodes", "success",
               "mean_time_s", "impact_share", "impacts_per_success", "curve_last_change", "curve_last"]
 
 
-def bootstrap_ci(M: np.ndarray, seed: int = 0) -> tuple[float, float]:
-    """95 % two-level bootstrap interval of the mean of M (seeds x episodes)."""
+def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) binomial interval of k successes in n trials: honest at k = 0 (upper
+    bound 1 - (alpha/2)^(1/n), e.g. 0/500 -> [0, 0.0074]) and at k = n."""
+    from scipy.stats import beta
+    if isinstance(k, bool) or isinstance(n, bool) or int(k) != k or int(n) != n:
+        raise TypeError(f"k and n must be integers, got k={k!r}, n={n!r}")
+    k, n = int(k), int(n)
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    if not 0 <= k <= n:
+        raise ValueError(f"k must be in [0, n = {n}], got {k}")
+    if not 0 < conf < 1:
+        raise ValueError(f"conf must be in (0, 1), got {conf!r}")
+    a = 1.0 - conf
+    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
+    return lo, hi
+
+
+def seed_clustered_ci(M, conf: float = 0.95) -> tuple[float, float]:
+    """Interval of the success rate clustered by seed, from M (seeds x episodes, 0/1): the Student t
+    interval over the seed means (seeds - 1 degrees of freedom) clipped to [0, 1], widened to contain
+    the pooled Clopper-Pearson interval, so that it is honest where every seed mean is 0 or 1 (the t
+    interval then has width 0). Unlike a percentile bootstrap over seeds it can leave the seed means'
+    hull. One seed: the pooled Clopper-Pearson interval."""
+    from scipy.stats import t as student_t
     M = np.asarray(M, float)
-    S, E = M.shape
-    rng = np.random.default_rng(seed)
-    si = rng.integers(0, S, (B, S))
-    ei = rng.integers(0, E, (B, S, E))
-    stats = M[si[:, :, None], ei].mean(axis=(1, 2))
-    lo, hi = np.percentile(stats, [2.5, 97.5])
-    return float(lo), float(hi)
+    if M.ndim != 2 or M.size == 0:
+        raise ValueError(f"M must be a non-empty (seeds, episodes) array, got shape {M.shape}")
+    if not np.isin(M, (0.0, 1.0)).all():
+        raise ValueError("M must hold 0/1 episode outcomes")
+    lo, hi = clopper_pearson(int(M.sum()), M.size, conf)
+    S = M.shape[0]
+    if S >= 2:
+        means = M.mean(axis=1)
+        half = float(student_t.ppf(0.5 + conf / 2, S - 1)) * float(means.std(ddof=1)) / np.sqrt(S)
+        lo = min(lo, max(0.0, float(means.mean()) - half))
+        hi = max(hi, min(1.0, float(means.mean()) + half))
+    return lo, hi
 
 
 def split_cell(cell: str) -> tuple[str, str]:
@@ -68,7 +99,7 @@ def cell_rows(groups) -> list[dict]:
         time_ = np.array([r["episodes"]["time"] for r in results], float)
         imp = np.array([r["episodes"]["impacts"] for r in results], float)
         ok = succ > 0
-        lo, hi = bootstrap_ci(succ)
+        lo, hi = seed_clustered_ci(succ)
         probe, table = split_cell(cell)
         change = last = ""
         curves = [r["curve"] for r in results if r["curve"]]
@@ -84,30 +115,6 @@ def cell_rows(groups) -> list[dict]:
             "curve_last_change": change, "curve_last": last})
     rows.sort(key=lambda r: (r["probe"], r["table"] != "Plane", r["table"], r["agent"]))
     return rows
-
-
-def verdict(rows_of_probe: list[dict]) -> tuple[str, str]:
-    """(verdict, reason) from the best agent (highest success) of each cell of one probe.
-
-    impacts needed: the best wall cell's interval lies above the plane's (lower > plane's upper);
-    not needed: the plane is solved (its lower bound > 0) and no wall cell lies above it;
-    inconclusive: otherwise (e.g. no agent solves any cell, or no plane cell)."""
-    best = {}
-    for r in rows_of_probe:
-        if r["table"] not in best or r["success"] > best[r["table"]]["success"]:
-            best[r["table"]] = r
-    plane = best.get("Plane")
-    walls = [r for t, r in best.items() if t != "Plane"]
-    if plane is None or not walls:
-        return "inconclusive", "needs the plane and at least one table"
-    top = max(walls, key=lambda r: r["ci_low"])
-    p = f"plane: {plane['agent']} {plane['success']:.2f} [{plane['ci_low']:.2f}, {plane['ci_high']:.2f}]"
-    w = f"best table {top['table']}: {top['agent']} {top['success']:.2f} [{top['ci_low']:.2f}, {top['ci_high']:.2f}]"
-    if top["ci_low"] > plane["ci_high"]:
-        return "impacts needed", f"{w} lies above the {p}"
-    if plane["ci_low"] > 0:
-        return "impacts not needed", f"the {p} is solved and the {w} does not lie above it"
-    return "inconclusive", f"{p}; {w}: no interval separates them and the plane is not shown solved"
 
 
 def paired_times(groups, probe: str = "Both") -> list[dict]:
@@ -145,10 +152,6 @@ def paired_times(groups, probe: str = "Both") -> list[dict]:
     return out
 
 
-README_BEGIN = "<!-- study-answer: written by python -m training.study (training/study_report.py, readme_answer) -->"
-README_END = "<!-- /study-answer -->"
-
-
 FLAT = 0.05  # a learning curve has flattened when its success rate rose by less than this over the last quarter,
 # or when it ends within FLAT of success 1 (no room left to rise)
 
@@ -164,32 +167,6 @@ def flattening(rows: list[dict]) -> tuple[list[str], list[dict]]:
     return solved, rising
 
 
-def readme_answer(rows: list[dict], report: str = "docs/study.md") -> str:
-    """The README's two-sentence answer, computed from the report's rows (never typed): the verdicts of
-    the single-input probes, then the both-controls probe's verdict and how often the trained agents'
-    table successes used impacts. Rows are the report's (or its CSV's, numbers as strings)."""
-    rows = [{k: _num(v) for k, v in r.items()} for r in rows]
-    verdicts = {p: verdict([r for r in rows if r["probe"] == p]) for p in PROBES
-                if any(r["probe"] == p for r in rows)}
-
-    def said(probe):
-        v, why = verdicts[probe]
-        return f"{PROBES[probe]}: **{v}** ({why})"
-
-    single = [said(p) for p in ("Steer", "Drive") if p in verdicts]
-    first = ("Observed in the RL study ([" + report + "](" + report + ")), beyond the plane's proven invariants: "
-             + "; ".join(single) + ".") if single else ""
-    second = ""
-    if "Both" in verdicts:
-        rl = [r for r in rows if r["probe"] == "Both" and r["agent"] in ("ppo", "sac") and r["table"] != "Plane"
-              and r["success"] > 0]
-        n_succ = sum(r["success"] * r["episodes"] for r in rl)
-        n_imp = sum(r["success"] * r["episodes"] * r["impact_share"] for r in rl)
-        second = (f"With both controls ({said('Both')}), {n_imp:.0f} of the trained agents' {n_succ:.0f} successful "
-                  "table episodes used at least one impact.")
-    return " ".join(x for x in (first, second) if x)
-
-
 def _num(v):
     """A CSV cell as a float where it is one (the rows read back from study.csv are strings)."""
     if isinstance(v, str):
@@ -198,17 +175,6 @@ def _num(v):
         except ValueError:
             return v
     return v
-
-
-def update_readme(readme: Path, answer: str) -> bool:
-    """Replace the text between README_BEGIN and README_END with answer; False if the markers are missing."""
-    text = readme.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        return False
-    head, rest = text.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
-    readme.write_text(f"{head}{README_BEGIN}\n{answer}\n{README_END}{tail}")
-    return True
 
 
 def plot_curves(groups, path: Path, probe: str) -> bool:
@@ -304,16 +270,11 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
               "(tolerance 1.5 cm), so they are unreachable.",
               "- Both hold between impacts on any table; only an impact can change theta_dot (steer) or phi_dot (drive).",
               "- With both controls the plane is controllable (the feedback controller below is one witness).", ""]
-    lines += ["## Verdicts (computed from the intervals)", "",
-              "Rule: the best agent (highest success) per cell; **impacts needed** when the best table cell's 95 % "
-              "interval lies above the plane's; **not needed** when the plane is solved (lower bound > 0) and no "
-              "table lies above it; else **inconclusive**.", "",
-              "| probe | verdict | because |", "| --- | --- | --- |"]
-    for probe in PROBES:
-        pr = [r for r in rows if r["probe"] == probe]
-        if pr:
-            v, why = verdict(pr)
-            lines.append(f"| {probe} ({PROBES[probe]}) | **{v}** | {why} |")
+    lines += ["## Which actuations and walls make the penny controllable", "",
+              "Not decided from these success rates: the verdict per (actuation, law, table) comes from the "
+              "theorems ([controllability_theory.md](controllability_theory.md)) and certified witness episodes "
+              "([witnesses.md](witnesses.md), `python -m training.witness_study`), with the agents below reported "
+              "beside it as learnability."]
     lines += ["", "Impacts in the successes of the trained agents (PPO, SAC) on tables, and time to success on "
               "the plane vs the tables (computed from the rows below):", ""]
     for probe in PROBES:
@@ -352,8 +313,9 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
               + (", all of them." if not rising else ". Still rising: " + "; ".join(
                   f"{r['probe']} {r['table']} {r['agent']} {r['curve_last_change']:+.2f}" for r in rising) + ".")]
     lines += ["", "## Observed, per cell", "",
-              "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % two-level "
-              "bootstrap interval (seeds, then episodes; 2000 resamples). time: mean time to success [s]. impact "
+              "success: evaluation success rate (deterministic policies for PPO/SAC) with its 95 % interval "
+              "clustered by seed (t interval over the seed means, widened to the pooled exact Clopper-Pearson "
+              "interval: honest at 0 and at 1). time: mean time to success [s]. impact "
               "share: share of successful episodes with at least one impact. impacts/success: mean impacts in a "
               "successful episode. last change: mean change of the eval success rate over the last quarter "
               "of the learning curve (last point minus the curve, linearly interpolated, at 3/4 of training; near 0: "
