@@ -109,8 +109,8 @@ def test_probe_of_and_overrides():
 
 # -- verdict rules ------------------------------------------------------------------------------------
 def test_verdict_rules():
-    assert cell_verdict("Steer", "plane", 0, 5) == "impossible (theorem T2)"
-    assert cell_verdict("Drive", "plane", 0, 30) == "impossible (theorem T3)"
+    assert cell_verdict("Steer", "plane", 0, 5) == "impossible (theorem T2.3)"
+    assert cell_verdict("Drive", "plane", 0, 30) == "impossible (theorem T3.2)"
     assert cell_verdict("Steer", "circle", 0, 30) == "open"
     assert cell_verdict("Steer", "circle", 7, 30) == "possible (witnessed 7/30)"
     assert cell_verdict("Both", "plane", 30, 30) == "possible (witnessed 30/30)"  # no theorem forbids it
@@ -189,7 +189,7 @@ def test_witness_study_quick_writes_only_its_folder(tmp_path):
     cells = ws.main(["--quick", "--workers", "1", "--out-dir", str(tmp_path)])
     assert {(c["probe"], c["table"], c["law"]) for c in cells} == set(ws.QUICK_CELLS)
     by = {(c["probe"], c["table"]): c for c in cells}
-    assert by[("Drive", "plane")]["verdict"] == "impossible (theorem T3)"
+    assert by[("Drive", "plane")]["verdict"] == "impossible (theorem T3.2)"
     assert by[("Drive", "ellipse")]["verdict"].startswith("possible (witnessed")
     text = (tmp_path / "witnesses.md").read_text()
     assert "## The verdict" in text and "theorem T3" in text and "witnessed" in text

@@ -14,28 +14,36 @@ witnessed rate.
 """
 from __future__ import annotations
 
+import functools
+
 THEORY_DOC = "controllability_theory.md"
 # GitHub's anchors of the theory page's headings ("## T2 Steer only" -> #t2-steer-only; a test checks them)
 ANCHORS = {"T1": "t1-impact-laws-in-scaled-speeds", "T2": "t2-steer-only", "T3": "t3-drive-only",
            "T4": "t4-both-controls"}
 
-# (probe, table) -> theorem id; the probe's task is impossible there on every law (the plane has no walls)
-THEOREMS = {
-    ("Steer", "plane"): ("T2", "on the open plane theta_dot is conserved with steering alone, and the probe starts "
-                               "with |R theta_dot| >= 0.03 m/s above the 0.01 m/s park tolerance"),
-    ("Drive", "plane"): ("T3", "on the open plane phi_dot = 0 is conserved with rolling alone, so the contact point "
-                               "stays on its heading line; the targets lie >= 3 cm off it (tolerance 1.5 cm)"),
-}
 # what the theory says of the cells it does not declare impossible (cited beside the witnessed verdict)
 CONTEXT = {"Steer": "T2", "Drive": "T3", "Both": "T4"}
 
 
-def theorem_of(probe: str, table: str):
-    """(theorem id, statement) where the theory proves the cell impossible, else None."""
-    return THEOREMS.get((probe, table))
+@functools.lru_cache(maxsize=None)
+def theorem_of(probe: str, table: str, law: str = "elastic"):
+    """(theorem id, statement) where the theory proves every pair of the cell impossible, else None. The
+    theory's own code decides (penny_env.analysis.controllability_theorems, which checks the theorem's
+    hypotheses against the cell's scene and task: start speeds, tolerances, heading offset)."""
+    from penny_env.analysis.controllability_theorems import theorem_for
+    from training.witness_study import cell_spec
+
+    env_id, overrides = cell_spec(probe, table, "elastic" if law == "-" else law)  # "-": the plane's one cell
+    found = theorem_for(env_id, **overrides)
+    return None if found is None else (found.id, found.reason)
 
 
-def cell_verdict(probe: str, table: str, witnessed: int, pairs: int) -> str:
+def anchor_of(theorem_id: str) -> str:
+    """The theory page's anchor of a statement id ("T2.3" -> the T2 section's)."""
+    return ANCHORS[theorem_id.split(".")[0]]
+
+
+def cell_verdict(probe: str, table: str, witnessed: int, pairs: int, law: str = "elastic") -> str:
     """The verdict of one cell from the theory and the witness counts (k witnessed of N pairs)."""
     for name, v in (("witnessed", witnessed), ("pairs", pairs)):
         if isinstance(v, bool) or int(v) != v:
@@ -44,7 +52,7 @@ def cell_verdict(probe: str, table: str, witnessed: int, pairs: int) -> str:
         raise ValueError(f"pairs must be >= 1, got {pairs}")
     if not 0 <= witnessed <= pairs:
         raise ValueError(f"witnessed must be in [0, pairs = {pairs}], got {witnessed}")
-    thm = theorem_of(probe, table)
+    thm = theorem_of(probe, table, law)
     if thm is not None:
         if witnessed:
             raise ValueError(f"{probe} on {table}: {witnessed} witnessed pair(s) contradict theorem {thm[0]} "

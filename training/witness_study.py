@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from training.study_report import clopper_pearson
-from training.verdict import ANCHORS, CONTEXT, THEORY_DOC, cell_verdict, learnability, theorem_of
+from training.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, learnability, theorem_of
 from training.witness import PROBES, Witness, positive_int
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -127,7 +127,7 @@ def cell_rows(pair_rows, seconds):
         out.append({"probe": probe, "table": table, "law": law, "env_id": env_id,
                     "overrides": " ".join(f"{a}={b}" for a, b in over.items()), "pairs": n, "witnessed": k,
                     "rate": k / n, "ci_low": lo, "ci_high": hi, "seconds": round(seconds.get((probe, table, law), 0.0), 1),
-                    "verdict": cell_verdict(probe, table, k, n)})
+                    "verdict": cell_verdict(probe, table, k, n, law)})
     return out
 
 
@@ -189,7 +189,7 @@ def _verdict_md(c, link=f"{THEORY_DOC}"):
     v = c["verdict"]
     if v.startswith("impossible"):
         thm = theorem_of(c["probe"], c["table"])[0]
-        return f"impossible ([theorem {thm}]({link}#{ANCHORS[thm]}))"
+        return f"impossible ([theorem {thm}]({link}#{anchor_of(thm)}))"
     return v
 
 
@@ -401,7 +401,7 @@ def main(argv=None):
         meta_json.write_text(json.dumps(meta, indent=1))
     cells.sort(key=_order)
     for c in cells:  # the verdict recomputed from the counts (a CSV edited by hand cannot carry another)
-        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]))
+        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"])
     rl = study_rl(args.study_csv)
     write_report(out_dir / "witnesses.md", cells, pair_rows, rl, meta)
     print(f"wrote {out_dir / 'witnesses.md'}")
