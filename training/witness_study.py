@@ -311,6 +311,7 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
              "candidate to the time limit there)",
              "- regenerate: run the command above from the repository root; "
              "`python -m training.witness_study --report-only` rewrites this report and the README from the CSVs",
+             *([meta["sources"]] if meta.get("sources") else []),
              f"- report rewritten with --report-only, {machine_lines()[2].lstrip('- ')}" if meta.get("rewritten") else "",
              "",
              "## The verdict", "",
@@ -387,6 +388,7 @@ def main(argv=None):
         meta = dict(json.loads(meta_json.read_text()), rewritten=True)
     else:
         from penny_env.analysis.common import command_line, machine_lines
+        from penny_env.analysis.provenance import stamp_line
         cells_todo = QUICK_CELLS if args.quick else all_cells()
         pairs = 2 if args.quick else args.pairs
         t0 = time.perf_counter()
@@ -395,7 +397,9 @@ def main(argv=None):
         meta = {"command": command_line("training.witness_study", list(sys.argv[1:] if argv is None else argv)),
                 "machine": machine_lines(), "wall_s": time.perf_counter() - t0,
                 "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "pairs": pairs,
-                "theorem_pairs": min(pairs, args.theorem_pairs)}
+                "theorem_pairs": min(pairs, args.theorem_pairs),
+                # the sources that made these searches (a later --report-only keeps it: a rewrite is no rerun)
+                "sources": stamp_line("docs/witnesses.md")}
         write_csv(cells_csv, cells, CELL_FIELDS)
         write_csv(pairs_csv, pair_rows, PAIR_FIELDS)
         meta_json.write_text(json.dumps(meta, indent=1))

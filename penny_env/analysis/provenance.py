@@ -65,6 +65,19 @@ REPORTS = {
     "docs/optimal_control.md": ("python -m training.optimal_control --workers 2",
                                 ("training/optimal_control.py", "training/shooting.py", "training/optimal_vs_rl.py",
                                  "penny_env/physics/sensitivity.py") + _PHYSICS + _TABLES),
+    "docs/billiards.md": ("python -m penny_env.analysis.billiards --out docs/billiards.md",
+                          ("penny_env/analysis/billiards.py", "penny_env/analysis/boundary_map.py", "penny_env/batch.py",
+                           "penny_env/physics/sensitivity.py", "penny_env/physics/compiled.py") + _PHYSICS + _TABLES),
+    "docs/witnesses.md": ("python -m training.witness_study --pairs 30 --workers 2",
+                          ("training/witness.py", "training/witness_study.py", "training/verdict.py",
+                           "training/policies.py", "penny_env/analysis/controllability_theorems.py",
+                           "penny_env/envs/vector_env.py", "penny_env/envs/penny_env.py") + _ENV + _PHYSICS + _TABLES),
+    "docs/contention.md": ("python -m penny_env.analysis.contention --out docs/contention.md",
+                           ("penny_env/analysis/contention.py", "penny_env/physics/parallel.py",
+                            "penny_env/physics/compiled.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
+    "docs/compile_time.md": ("python -m penny_env.analysis.compile_time --out docs/compile_time.md",
+                             ("penny_env/analysis/compile_time.py", "penny_env/physics/compiled.py",
+                              "penny_env/physics/parallel.py") + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m penny_env.analysis.throughput_compare --before OLD --after NEW "
@@ -81,7 +94,11 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "penny_env.analysis.controllability": "docs/controllability.md",
                   "training.study": "docs/study.md",
                   "training.optimal_control": "docs/optimal_control.md",
-                  "penny_env.analysis.throughput_compare": "docs/throughput_compare.md"}
+                  "penny_env.analysis.throughput_compare": "docs/throughput_compare.md",
+                  "penny_env.analysis.billiards": "docs/billiards.md",
+                  "training.witness_study": "docs/witnesses.md",
+                  "penny_env.analysis.contention": "docs/contention.md",
+                  "penny_env.analysis.compile_time": "docs/compile_time.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")
