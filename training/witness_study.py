@@ -270,7 +270,7 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
         if wit:
             rates = [int(c["witnessed"]) / int(c["pairs"]) for c in wit]
             low = min(clopper_pearson(int(c["witnessed"]), int(c["pairs"]))[0] for c in wit)
-            bits.append(f"possible in {len(wit)} cells, witnessed in {min(rates):.0%} to {max(rates):.0%} of the "
+            bits.append(f"possible in {len(wit)} cells, witnessed in {_span(rates, '.0%')} of the "
                         f"pairs per cell (lowest exact 95 % lower bound {low:.2f})")
         if opn:
             bits.append(f"open in {len(opn)} cells")
@@ -281,7 +281,7 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
                 shares.append(learnability(k, n, int(c["witnessed"]), int(c["pairs"]))[2])
                 succ.append((k, n))
         if shares:
-            bits.append(f"the RL study's best agents (PPO/SAC) reach {min(shares):.2f} to {max(shares):.2f} of the "
+            bits.append(f"the RL study's best agents (PPO/SAC) reach {_span(shares, '.2f')} of the "
                         f"witnessed rate on the {len(shares)} of these cells it trained on"
                         + (f" (0 successes in each: exact 95 % upper bounds up to "
                            f"{max(clopper_pearson(k, n)[1] for k, n in succ):.4f})" if not any(k for k, _ in succ) else ""))
@@ -299,6 +299,12 @@ def update_readme(readme: Path, answer: str) -> bool:
     _, tail = rest.split(README_END, 1)
     readme.write_text(f"{head}{README_BEGIN}\n{answer}\n{README_END}{tail}")
     return True
+
+
+def _span(values, fmt: str) -> str:
+    """'a to b' of the values' range as formatted, or one value where both ends read the same."""
+    lo, hi = format(min(values), fmt), format(max(values), fmt)
+    return lo if lo == hi else f"{lo} to {hi}"
 
 
 def write_report(out: Path, cells, pair_rows, rl, meta):
