@@ -46,7 +46,7 @@ def test_quick_without_out_writes_to_a_temporary_directory(reports_untouched, ca
 def test_train_output_folder(reports_untouched, monkeypatch):
     from training import train
     seen = []
-    monkeypatch.setattr(train, "train", lambda cfg, out, quick=False: seen.append((out, quick)))
+    monkeypatch.setattr(train, "train", lambda cfg, out, quick=False, **kw: seen.append((out, quick)))
     config = str(REPO / "configs" / "train" / "ppo_reach_ellipse.yaml")
     train.main(["--config", config, "--quick", "--out", "runs/mine"])
     train.main(["--config", config, "--quick"])
