@@ -17,7 +17,7 @@ def test_report_path(reports_untouched):
     cwd = reports_untouched
     assert report_path("a/b.md", quick=True, name="x.md") == cwd / "a" / "b.md"
     assert report_path("a/b.md", quick=False, name="x.md") == cwd / "a" / "b.md"
-    assert report_path(None, quick=False, name="x.md") == cwd / "docs" / "x.md"
+    assert report_path(None, quick=False, name="x.md") == cwd / "runs" / "reports" / "x.md"  # never a tracked file
     quick = report_path(None, quick=True, name="x.md")
     assert quick.name == "x.md" and quick.parent.is_dir()
     assert Path(tempfile.gettempdir()).resolve() in quick.resolve().parents and cwd not in quick.parents
