@@ -52,7 +52,8 @@ def test_single_env_info_width_and_reset_keys():
 @pytest.mark.slow
 def test_torchrl_gymenv_with_num_envs():
     from torchrl.envs import GymEnv
-    env = GymEnv("PennyImpacts-Stadium-v0", num_envs=2)  # gymnasium's AsyncVectorEnv of the single env
+    # gymnasium's AsyncVectorEnv of the single env; its workers may be spawned: the prefixed id imports penny_env
+    env = GymEnv("penny_env:PennyImpacts-Stadium-v0", num_envs=2)
     td = env.rollout(20, break_when_any_done=False)
     env.close()
     assert td["next", "observation"].shape == (2, 20, 11) and td["next", "impact_times"].shape == (2, 20, 8)
