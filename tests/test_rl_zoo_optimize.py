@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_zoo_extra_carries_what_optimize_needs():
-    import tomllib
+    tomllib = pytest.importorskip("tomllib", reason="Python >= 3.11 (tomllib)")
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
     assert any(dep.startswith("pandas") for dep in extras["zoo"]), "rl_zoo3 -optimize writes its table with pandas"
 
