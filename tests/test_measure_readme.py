@@ -45,3 +45,21 @@ def test_quick_measures_the_main_job(reports_untouched, capsys):
     out = capsys.readouterr().out
     assert "| `python -m penny_env.analysis.paper_figures` |" in out and "load average" in out
     assert list(reports_untouched.iterdir()) == []  # the report went to a temporary folder
+
+
+def test_report_only_renders_the_stored_parts(reports_untouched, capsys):
+    with pytest.raises(SystemExit):
+        measure_readme.main(["--report-only", "--out", "costs.md"])
+    assert "no part measured yet" in capsys.readouterr().err
+    store = reports_untouched / "runs" / "readme_costs"
+    assert store.is_dir()  # (made by the first call)
+    part = {"part": "main", "quick": False, "machine": ["- machine: M"], "load_at_start": [3.0, 2.0, 1.0],
+            "steps": [{"step": "pip install x", "seconds": 30.0, "rc": 0, "load": {"mean": 2.5, "max": 4.0},
+                       "venv_bytes": 2**30},
+                      {"step": "python -m training.train", "seconds": 600.0, "rc": 1, "load": {"mean": 1, "max": 2}}]}
+    (store / "main.json").write_text(__import__("json").dumps(part))
+    measure_readme.main(["--report-only", "--out", "costs.md"])
+    text = (reports_untouched / "costs.md").read_text()
+    assert "| `pip install x` | 30 s | 0 | 2.5 / 4.0 | 1.00 GiB |" in text
+    assert "| `python -m training.train` | 600 s (10.0 min) | 1 |" in text and "a step FAILED" in text
+    assert "load average at the start (1, 5, 15 min): 3.0, 2.0, 1.0" in text and "Install and run the tests" not in text

@@ -2,12 +2,12 @@
 step by step, in a fresh copy of the checkout with a fresh virtual environment; the report gives each
 step's wall time, the virtual environment's size after each install and the machine's load average.
 
-    python -m training.measure_readme [--parts main tests] [--out docs/readme_costs.md] [--quick]
+    python -m training.measure_readme [--parts main tests] [--out docs/readme_costs.md] [--quick] [--report-only]
 
 Parts: "main" (the README's main job: install, the paper's figures, the PPO baseline) and "tests"
 (install everything, the test suite). Each part's measurement is kept in runs/readme_costs/<part>.json
 (under the working directory), so the parts can be measured at different times; the report is built
-from every part measured so far, each with its own date and load. Installs take their wheels from
+from every part measured so far, each with its own date and load (--report-only: only that). Installs take their wheels from
 pip's cache or the machine's package index as configured: the report says how long that took here,
 not how long a download would. --quick checks the pipeline: the main job only, in the current
 environment (no venv, no installs), training cut to 4096 steps, the report into a temporary folder.
@@ -172,18 +172,23 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="the report (default: runs/reports/readme_costs.md under the "
                                                 "working directory; --quick: a new temporary directory)")
     ap.add_argument("--quick", action="store_true", help="the main job in the current environment, training cut short")
+    ap.add_argument("--report-only", action="store_true", help="measure nothing: the report of the parts measured so far")
     args = ap.parse_args(argv)
+    if args.quick and args.report_only:
+        ap.error("--quick and --report-only exclude each other")
     from penny_env.analysis.common import report_path, write
     out = report_path(args.out, args.quick, "readme_costs.md")
     store = (out.parent / "readme_costs_parts") if args.quick else Path("runs") / "readme_costs"
     store.mkdir(parents=True, exist_ok=True)
     readme = (ROOT / "README.md").read_text()
-    parts = ["main"] if args.quick else args.parts
+    parts = [] if args.report_only else ["main"] if args.quick else args.parts
     for part in parts:
         with tempfile.TemporaryDirectory(prefix=f"penny_env-readme-{part}-") as tmp:
             res = run_part(part, readme, copy_checkout(Path(tmp)), quick=args.quick)
         (store / f"{part}.json").write_text(json.dumps(res, indent=2))
     results = {p: json.loads((store / f"{p}.json").read_text()) for p in PARTS if (store / f"{p}.json").is_file()}
+    if not results:
+        ap.error(f"no part measured yet in {store}: run without --report-only first")
     lines = report(results)
     write(str(out), lines)
     print("\n".join(lines))
