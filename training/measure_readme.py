@@ -142,7 +142,9 @@ def report(results: dict) -> list[str]:
              "Written by `python -m training.measure_readme` (each command of the README run as written, in a fresh copy",
              "of the checkout with a fresh virtual environment). The machine is shared: the load average says how",
              "busy it was (2 cores: a load above 2 means other jobs competed for them); an idle machine is faster.",
-             "Installs take their wheels from pip's cache and the machine's package index: no download time.", ""]
+             "Installs take their wheels from pip's cache and the machine's package index: no download time.",
+             "Regenerate: `python -m training.measure_readme --out docs/readme_costs.md` (both parts), or one part",
+             "with `--parts main` or `--parts tests` (the other part's last measurement is kept).", ""]
     for part in ("main", "tests"):
         if part not in results:
             continue
