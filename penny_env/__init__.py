@@ -1,11 +1,11 @@
 """penny_env: an exact event-driven simulator of the bouncing penny and Gymnasium environments on it."""
 from .physics import (PennyParams, SolverSettings, Table, Ellipse, Circle, Stadium, RoundedRectangle, ConvexTable,
                       register_table, register_law, simulate, impact_map, Trajectory)
-from .envs import PennyEnv, PennyVectorEnv, register_envs
+from .envs import PennyEnv, PennyGoalEnv, PennyVectorEnv, register_envs, make_env
 
 __version__ = "0.1.0"
 __all__ = ["PennyParams", "SolverSettings", "Table", "Ellipse", "Circle", "Stadium", "RoundedRectangle", "ConvexTable",
-           "register_table", "register_law", "simulate", "impact_map", "Trajectory", "PennyEnv", "PennyVectorEnv", "register_envs"]
+           "register_table", "register_law", "simulate", "impact_map", "Trajectory", "PennyEnv", "PennyGoalEnv", "PennyVectorEnv", "register_envs", "make_env"]
 
 # the Gymnasium ids (penny_env/presets/envs.yaml): gymnasium.make("penny_env:PennyReach-Ellipse-v0") works
 register_envs()

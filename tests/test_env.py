@@ -83,7 +83,9 @@ def test_rollout_spaces_info_and_truncation(env_id):
         obs, r, term, trunc, info = env.step(env.action_space.sample())
         steps += 1
         assert env.observation_space.contains(obs) and np.isfinite(r)
-        assert info["impacts"] == len(info["impact_times"]) == len(info["impact_ends"])
+        k = min(info["impacts"], 8)  # fixed-width arrays (max_impacts_in_info = 8), padded
+        assert info["impact_times"].shape == info["impact_ends"].shape == (8,)
+        assert np.count_nonzero(info["impact_ends"]) == k and not info["impact_times"][k:].any()
         assert info["time"] == pytest.approx(steps * u.scene.control_dt)
         assert info["kinetic_energy"] >= 0
         if term or trunc:
@@ -102,9 +104,9 @@ def test_impacts_happen_with_random_actions():
         for _ in range(2000):  # pennies start near rest; random torques take a while to reach a wall
             _, _, term, trunc, info = env.step(env.action_space.sample())
             total += info["impacts"]
-            times = np.asarray(info["impact_times"])
+            times = info["impact_times"][:min(info["impacts"], 8)]
             assert np.all((times >= 0) & (times <= 0.05 + 1e-12))
-            assert set(info["impact_ends"]) <= {1, -1}
+            assert set(info["impact_ends"][:len(times)]) <= {1, -1}
             if term or trunc:
                 env.reset()
         assert total >= 5, env_id

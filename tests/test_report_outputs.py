@@ -17,7 +17,7 @@ def test_report_path(reports_untouched):
     cwd = reports_untouched
     assert report_path("a/b.md", quick=True, name="x.md") == cwd / "a" / "b.md"
     assert report_path("a/b.md", quick=False, name="x.md") == cwd / "a" / "b.md"
-    assert report_path(None, quick=False, name="x.md") == cwd / "docs" / "x.md"
+    assert report_path(None, quick=False, name="x.md") == cwd / "runs" / "reports" / "x.md"  # never a tracked file
     quick = report_path(None, quick=True, name="x.md")
     assert quick.name == "x.md" and quick.parent.is_dir()
     assert Path(tempfile.gettempdir()).resolve() in quick.resolve().parents and cwd not in quick.parents
@@ -46,7 +46,7 @@ def test_quick_without_out_writes_to_a_temporary_directory(reports_untouched, ca
 def test_train_output_folder(reports_untouched, monkeypatch):
     from training import train
     seen = []
-    monkeypatch.setattr(train, "train", lambda cfg, out, quick=False: seen.append((out, quick)))
+    monkeypatch.setattr(train, "train", lambda cfg, out, quick=False, **kw: seen.append((out, quick)))
     config = str(REPO / "configs" / "train" / "ppo_reach_ellipse.yaml")
     train.main(["--config", config, "--quick", "--out", "runs/mine"])
     train.main(["--config", config, "--quick"])

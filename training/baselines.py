@@ -16,7 +16,7 @@ def main(argv=None):
     ap.add_argument("--episodes", type=int, default=64)
     ap.add_argument("--quick", action="store_true", help="4 episodes on two ids (for tests)")
     ap.add_argument("--out", default=None,
-                    help="Markdown report (default: docs/baselines.md under the working directory; "
+                    help="Markdown report (default: runs/reports/baselines.md under the working directory; "
                     "--quick: a new temporary directory)")
     args = ap.parse_args(argv)
     import gymnasium as gym

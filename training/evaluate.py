@@ -1,10 +1,12 @@
 """Evaluate a saved run: success rate with its 95 % interval, and a video of a few episodes.
 
     python -m training.evaluate RUN_DIR [--episodes 100] [--seed S] [--video-episodes 3] [--no-video]
-                                        [--gif PATH [--gif-success]]
+                                        [--gif PATH [--gif-success]] [--best]
 
-RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip; every
-(cell, agent, seed) folder of training.study for PPO/SAC). Episodes are deterministic-policy
+RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip): the output
+folder of training.train and every (cell, agent, seed) folder of training.study for PPO/SAC.
+--best evaluates best_model.zip (the best evaluation during training) instead of the final model,
+into RUN_DIR/evaluation_best.json. Episodes are deterministic-policy
 episodes on fresh seeds (default: the run's evaluation seeds). The interval is Wilson's score
 interval for a binomial proportion. Videos (gymnasium RecordVideo, needs moviepy and pygame)
 go to RUN_DIR/videos/; results to RUN_DIR/evaluation.json. --gif writes one episode as an animated
@@ -72,18 +74,19 @@ def write_gif(env_id: str, model, path: Path, seed: int) -> int:
 
 
 def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_episodes: int = 3,
-                 gif: str | None = None, gif_success: bool = False) -> dict:
+                 gif: str | None = None, gif_success: bool = False, best: bool = False) -> dict:
     from training.episodes import run_episodes
     from training.runner import eval_seed, load_run
     run_dir = Path(run_dir)
     if not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    cfg, model = load_run(run_dir)
+    model_file = "best_model.zip" if best else "model.zip"
+    cfg, model = load_run(run_dir, model_file)
     seed = eval_seed(cfg["seed"]) if seed is None else seed
     r = run_episodes(cfg["env_id"], lambda o: model.predict(o, deterministic=True)[0], episodes, seed)
     k = int(np.sum(r["success"]))
     lo, hi = wilson_interval(k, episodes)
-    res = {"env_id": cfg["env_id"], "algo": cfg["algo"], "episodes": episodes, "seed": seed, "successes": k,
+    res = {"env_id": cfg["env_id"], "algo": cfg["algo"], "model": str(run_dir / model_file), "episodes": episodes, "seed": seed, "successes": k,
            "success_rate": k / episodes, "ci95_wilson": [lo, hi], "mean_return": float(np.mean(r["return"])),
            "mean_impacts": float(np.mean(r["impacts"]))}
     if video_episodes > 0:
@@ -92,7 +95,7 @@ def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_ep
         first = next((j for j, ok in enumerate(r["success"]) if ok), 0) if gif_success else 0
         write_gif(cfg["env_id"], model, Path(gif), seed + first)
         res["gif"], res["gif_seed"], res["gif_success"] = str(gif), seed + first, bool(r["success"][first])
-    (run_dir / "evaluation.json").write_text(json.dumps(res, indent=2))
+    (run_dir / ("evaluation_best.json" if best else "evaluation.json")).write_text(json.dumps(res, indent=2))
     return res
 
 
@@ -105,10 +108,11 @@ def main(argv=None):
     ap.add_argument("--no-video", action="store_true")
     ap.add_argument("--gif", default=None, help="also write an episode as an animated GIF here (the first one)")
     ap.add_argument("--gif-success", action="store_true", help="the GIF shows the first episode that succeeded")
+    ap.add_argument("--best", action="store_true", help="evaluate best_model.zip (best evaluation during training)")
     args = ap.parse_args(argv)
     try:
         res = evaluate_run(args.run_dir, args.episodes, args.seed, 0 if args.no_video else args.video_episodes,
-                           args.gif, args.gif_success)
+                           args.gif, args.gif_success, args.best)
     except ValueError as exc:
         ap.error(str(exc))
     lo, hi = res["ci95_wilson"]

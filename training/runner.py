@@ -4,8 +4,13 @@
     RUN_DIR/progress.csv     SB3's CSV log (train/* and eval/* rows)
     RUN_DIR/events.out.tfevents.*  TensorBoard events (``tensorboard --logdir RUN_DIR``)
     RUN_DIR/curve.csv        evaluation during training: timesteps, success_rate, mean_return
-    RUN_DIR/checkpoints/     model_<steps>_steps.zip every checkpoint_freq steps
+    RUN_DIR/checkpoints/     model_<steps>_steps.zip every checkpoint_freq steps (SAC, when asked: and
+                             model_replay_buffer_<steps>_steps.pkl, for --resume)
+    RUN_DIR/best_model.zip   the model of the best evaluation so far (success rate, then mean return),
+                             RUN_DIR/best.json its timesteps and scores
     RUN_DIR/model.zip        the final model (``python -m training.evaluate RUN_DIR``)
+
+training.train, training.study and training.evaluate all use this layout.
 
 Seeds: the model (torch, action sampling), the training envs (sub-env i: seed + i) and the
 evaluation episodes (seeds from eval_seed(seed)) all derive from ``seed``; on CPU with one torch
@@ -58,18 +63,24 @@ def make_train_env(env_id: str, num_envs: int, seed: int):
     return venv
 
 
-def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out_csv: Path):
+def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out_csv: Path,
+                          best_model: Path | None = None):
     """An SB3 callback: every `every` env steps, run `episodes` deterministic episodes (fixed
     seeds) and log eval/success_rate (from info["is_success"]) and eval/mean_return to SB3's
-    logger (CSV, TensorBoard) and to out_csv."""
+    logger (CSV, TensorBoard) and to out_csv. With best_model, the model of the best evaluation
+    (success rate, ties broken by mean return) is saved there and its scores next to it (best.json).
+    A resumed run (a model with timesteps already) keeps the rows of out_csv and the best so far."""
     from stable_baselines3.common.callbacks import BaseCallback
     from training.episodes import run_episodes
+
+    best_json = None if best_model is None else Path(best_model).with_name("best.json")
 
     class SuccessEval(BaseCallback):
         def __init__(self):
             super().__init__()
             self.next = 0
             self.rows = []
+            self.best = None  # (success_rate, mean_return)
 
         def _evaluate(self):
             r = run_episodes(env_id, lambda o: self.model.predict(o, deterministic=True)[0], episodes, seed)
@@ -81,10 +92,28 @@ def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out
                 w = csv.writer(f)
                 w.writerow(["timesteps", "success_rate", "mean_return"])
                 w.writerows(self.rows)
+            if best_model is not None and (self.best is None or row[1:] > self.best):
+                self.best = row[1:]
+                self.model.save(best_model)
+                best_json.write_text(json.dumps({"timesteps": row[0], "success_rate": row[1], "mean_return": row[2]}))
 
         def _on_training_start(self):
+            if self.num_timesteps > 0:  # resumed: keep what the run logged up to its checkpoint
+                self._resume()
+                return
             self._evaluate()
             self.next = every
+
+        def _resume(self):
+            if Path(out_csv).is_file():
+                with open(out_csv) as f:
+                    self.rows = [(int(float(r["timesteps"])), float(r["success_rate"]), float(r["mean_return"]))
+                                 for r in csv.DictReader(f) if float(r["timesteps"]) <= self.num_timesteps]
+            if best_json is not None and best_json.is_file():
+                b = json.loads(best_json.read_text())
+                if b["timesteps"] <= self.num_timesteps:
+                    self.best = (b["success_rate"], b["mean_return"])
+            self.next = (self.num_timesteps // every + 1) * every
 
         def _on_step(self):
             if self.num_timesteps >= self.next:
@@ -100,16 +129,79 @@ def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out
     return SuccessEval()
 
 
+def progress_lines_callback(total: int, every_seconds: float, curve=None, print_fn=print):
+    """An SB3 callback that prints one line every `every_seconds` of wall time (and at the end):
+    steps done of `total`, env steps per second, the last evaluation's success rate (from the
+    SuccessEval callback `curve`, if given) and the estimated time left. For runs off a terminal
+    (nohup, a scheduler, CI), where a progress bar draws nothing."""
+    import sys
+    import time
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class ProgressLines(BaseCallback):
+        def _on_training_start(self):
+            self.t0 = self.last = time.perf_counter()
+            self.start_steps = self.num_timesteps
+
+        def _line(self):
+            elapsed = time.perf_counter() - self.t0
+            done = self.num_timesteps - self.start_steps
+            fps = done / elapsed if elapsed > 0 else 0.0
+            left = max(0, total - self.num_timesteps)
+            eta = f"{left / fps:.0f} s" if fps > 0 else "?"
+            succ = ""
+            if curve is not None and curve.rows:
+                succ = f", eval success {curve.rows[-1][1]:.2f} at {curve.rows[-1][0]:,} steps"
+            print_fn(f"[train] {self.num_timesteps:,}/{total:,} steps ({100 * self.num_timesteps / total:.0f} %), "
+                     f"{fps:,.0f} steps/s{succ}, elapsed {elapsed:.0f} s, ETA {eta}")
+            sys.stdout.flush()
+
+        def _on_step(self):
+            now = time.perf_counter()
+            if now - self.last >= every_seconds:
+                self.last = now
+                self._line()
+            return True
+
+        def _on_training_end(self):
+            self._line()
+
+    return ProgressLines()
+
+
+def latest_checkpoint(path) -> Path:
+    """The model zip to resume from: PATH itself (a .zip), or the newest checkpoint of a run folder
+    (PATH/checkpoints/model_<steps>_steps.zip, by steps). ValueError if there is none."""
+    path = Path(path)
+    if path.is_file():
+        return path
+    found = sorted(Path(path, "checkpoints").glob("model_*_steps.zip"),
+                   key=lambda p: int(p.stem.split("_")[-2]) if p.stem.split("_")[-2].isdigit() else -1)
+    if not found:
+        raise ValueError(f"resume: {path} is neither a model .zip nor a run folder with checkpoints/model_*_steps.zip")
+    return found[-1]
+
+
 def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_envs: int = 8,
                 hyperparameters: dict | None = None, eval_points: int = 10, eval_episodes: int = 32,
-                checkpoints: int = 2):
-    """Train, log, checkpoint and save; returns the model."""
+                checkpoints: int = 2, *, checkpoint_freq: int | None = None, save_replay_buffer: bool = False,
+                resume=None, progress: str | None = None, progress_seconds: float = 30.0):
+    """Train, log, checkpoint and save; returns the model.
+
+    checkpoint_freq: env steps between checkpoints (default: timesteps / checkpoints);
+    save_replay_buffer: SAC checkpoints also save the replay buffer (what --resume needs to go on
+    exactly where it stopped); resume: a checkpoint .zip or a run folder (its newest checkpoint):
+    the model (and the replay buffer saved with it) is loaded and trained on up to `timesteps` in all;
+    progress: None (silent), "bar" (SB3's progress bar, for a terminal) or "lines" (a line every
+    progress_seconds)."""
     import torch
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.logger import configure
 
     hyper = copy.deepcopy(dict(hyperparameters or {}))  # SB3 writes into policy_kwargs (use_sde): not into the caller's job
     check_hyperparameters(algo, hyper)
+    if progress not in (None, "bar", "lines"):
+        raise ValueError(f"progress must be None, 'bar' or 'lines', got {progress!r}")
     Algo = algo_class(algo)
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -118,24 +210,44 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
     cfg = {"env_id": env_id, "algo": algo, "seed": seed, "timesteps": timesteps, "num_envs": num_envs,
            "hyperparameters": hyper}
     (run_dir / "config.json").write_text(json.dumps(cfg, indent=2))
-    model = Algo("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", **hyper)
-    model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    if resume is None:
+        model = Algo("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", **hyper)
+    else:
+        ckpt = latest_checkpoint(resume)
+        model = Algo.load(ckpt, env=venv, device="cpu")
+        buffer = ckpt.with_name(ckpt.name.replace("model_", "model_replay_buffer_").replace(".zip", ".pkl"))
+        if hasattr(model, "load_replay_buffer") and buffer.is_file():
+            model.load_replay_buffer(buffer)
+    formats = ["csv"] + (["tensorboard"] if _tensorboard_installed() else [])
+    model.set_logger(configure(str(run_dir), formats))
     every = max(1, timesteps // max(1, eval_points))
-    ckpt_every = max(1, timesteps // max(1, checkpoints) // num_envs)
-    callbacks = CallbackList([
-        success_eval_callback(env_id, every, eval_episodes, eval_seed(seed) + 5_000, run_dir / "curve.csv"),
-        CheckpointCallback(ckpt_every, str(run_dir / "checkpoints"), name_prefix="model"),
-    ])
-    model.learn(total_timesteps=timesteps, callback=callbacks)
+    ckpt_steps = checkpoint_freq or max(1, timesteps // max(1, checkpoints))
+    curve = success_eval_callback(env_id, every, eval_episodes, eval_seed(seed) + 5_000, run_dir / "curve.csv",
+                                  run_dir / "best_model.zip")
+    callbacks = [curve, CheckpointCallback(max(1, ckpt_steps // num_envs), str(run_dir / "checkpoints"),
+                                           name_prefix="model", save_replay_buffer=save_replay_buffer)]
+    if progress == "lines":
+        callbacks.append(progress_lines_callback(timesteps, progress_seconds, curve))
+    remaining = timesteps - model.num_timesteps
+    if remaining > 0:
+        model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=resume is None,
+                    progress_bar=progress == "bar")
     model.save(run_dir / "model.zip")
     venv.close()
     return model
 
 
-def load_run(run_dir):
-    """(config, model) of a run folder; ValueError naming a missing or incompatible file."""
+def _tensorboard_installed() -> bool:
+    """SB3's TensorBoard output needs the tensorboard package (the [train] extra)."""
+    import importlib.util
+    return importlib.util.find_spec("tensorboard") is not None
+
+
+def load_run(run_dir, model_file: str = "model.zip"):
+    """(config, model) of a run folder (model_file: model.zip, best_model.zip or a checkpoint under
+    it); ValueError naming a missing or incompatible file."""
     run_dir = Path(run_dir)
-    cfg_path, model_path = run_dir / "config.json", run_dir / "model.zip"
+    cfg_path, model_path = run_dir / "config.json", run_dir / model_file
     if not cfg_path.is_file():
         raise ValueError(f"{cfg_path}: missing (not a run folder of training.runner?)")
     if not model_path.is_file():

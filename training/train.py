@@ -2,11 +2,21 @@
 zero actions on fresh seeds.
 
     python -m training.train --config configs/train/ppo_reach_ellipse.yaml [--quick] [--out runs/NAME]
+                             [--resume RUN_DIR_OR_CHECKPOINT] [--progress-seconds 30]
 
 The config (YAML) names env_id, algo (ppo or sac), num_envs, total_timesteps, seed,
-eval_episodes, algo_kwargs and policy_kwargs; --set key=value overrides a top-level field.
-The run writes model.zip, results.json and results.md to --out (default runs/<config name>;
---quick without --out: a new temporary directory).
+eval_episodes, algo_kwargs and policy_kwargs, and optionally checkpoint_freq (env steps between
+checkpoints, default total_timesteps / 10), curve_points (evaluations during training, default 10)
+and curve_episodes (episodes per evaluation, default 32); --set key=value overrides a top-level field.
+
+The run folder (--out; default runs/<config name>; --quick without --out: a new temporary
+directory) has training.runner's layout, which training.evaluate reads: config.json, model.zip,
+best_model.zip (best evaluation success), checkpoints/, curve.csv, progress.csv, TensorBoard
+events (``tensorboard --logdir runs``), plus results.json and results.md: the trained policy
+against zero and random actions on fresh seeds. The folder is printed at the start and the end.
+On a terminal SB3's progress bar shows; elsewhere (nohup, a scheduler, CI) a line every
+--progress-seconds gives steps, steps/s, the last evaluation's success and the time left.
+--resume goes on from a checkpoint (a run folder: its newest; SAC: with its replay buffer).
 """
 from __future__ import annotations
 
@@ -20,7 +30,8 @@ import numpy as np
 import yaml
 
 ALGOS = ("ppo", "sac")
-FIELDS = {"env_id", "algo", "num_envs", "total_timesteps", "seed", "eval_episodes", "algo_kwargs", "policy_kwargs"}
+FIELDS = {"env_id", "algo", "num_envs", "total_timesteps", "seed", "eval_episodes", "algo_kwargs", "policy_kwargs",
+          "checkpoint_freq", "curve_points", "curve_episodes"}
 
 
 def load_config(path, overrides=()):
@@ -43,7 +54,10 @@ def load_config(path, overrides=()):
         raise ValueError(f"{path}: env_id {cfg.get('env_id')!r} is not a registered id")
     if cfg.get("algo") not in ALGOS:
         raise ValueError(f"{path}: algo must be one of {ALGOS}, got {cfg.get('algo')!r}")
-    for key, default in (("num_envs", 8), ("total_timesteps", 100_000), ("seed", 0), ("eval_episodes", 100)):
+    for key, default in (("num_envs", 8), ("total_timesteps", 100_000), ("seed", 0), ("eval_episodes", 100),
+                         ("checkpoint_freq", None), ("curve_points", 10), ("curve_episodes", 32)):
+        if default is None:  # checkpoint_freq: ten checkpoints per run unless the config says
+            default = max(1, cfg["total_timesteps"] // 10)
         value = cfg.setdefault(key, default)
         if isinstance(value, bool) or not isinstance(value, int) or value < (0 if key == "seed" else 1):
             raise ValueError(f"{path}: {key} must be a {'non-negative' if key == 'seed' else 'positive'} integer, got {value!r}")
@@ -83,31 +97,41 @@ def _progress_bar_installed() -> bool:
     return all(importlib.util.find_spec(m) is not None for m in ("tqdm", "rich"))
 
 
-def train(cfg, out: Path, quick: bool = False):
-    import torch
-    from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.vec_env import VecMonitor
-    from penny_env.sb3 import PennySB3VecEnv
+def progress_mode(stream=None) -> str:
+    """'bar' on a terminal (with tqdm and rich), else 'lines': a bar draws nothing under nohup or CI."""
+    import sys
+    stream = sys.stdout if stream is None else stream
+    isatty = getattr(stream, "isatty", None)
+    return "bar" if isatty is not None and isatty() and _progress_bar_installed() else "lines"
 
-    torch.set_num_threads(1)
+
+def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None = None,
+          progress_seconds: float = 30.0):
+    """Train into the run folder `out` (training.runner's layout), then compare the trained policy
+    with zero and random actions; returns the results (also results.json, results.md)."""
+    from training.runner import train_agent
+
+    out = Path(out)
+    print(f"output folder: {out}", flush=True)
     total = 2_048 if quick else cfg["total_timesteps"]
     n_eval = 8 if quick else cfg["eval_episodes"]
-    venv = VecMonitor(PennySB3VecEnv(cfg["env_id"], num_envs=cfg["num_envs"]))
-    venv.seed(cfg["seed"])
     algo_kwargs = dict(cfg["algo_kwargs"])
     if quick and cfg["algo"] == "ppo":
         algo_kwargs.update(n_steps=32, batch_size=256, n_epochs=2)
     if quick and cfg["algo"] == "sac":
         algo_kwargs.update(learning_starts=256, buffer_size=10_000)
-    Algo = PPO if cfg["algo"] == "ppo" else SAC
-    model = Algo("MlpPolicy", venv, seed=cfg["seed"], policy_kwargs=cfg["policy_kwargs"], verbose=0, **algo_kwargs)
+    hyper = {**algo_kwargs, "policy_kwargs": dict(cfg["policy_kwargs"])}
     t0 = time.perf_counter()
-    model.learn(total_timesteps=total, progress_bar=not quick and _progress_bar_installed())
+    model = train_agent(out, cfg["env_id"], cfg["algo"], cfg["seed"], total, cfg["num_envs"], hyper,
+                        eval_points=2 if quick else cfg["curve_points"],
+                        eval_episodes=8 if quick else cfg["curve_episodes"],
+                        checkpoint_freq=total // 2 if quick else cfg["checkpoint_freq"],
+                        save_replay_buffer=cfg["algo"] == "sac", resume=resume,
+                        progress=progress_mode() if progress is None else progress,
+                        progress_seconds=progress_seconds)
     seconds = time.perf_counter() - t0
-    out.mkdir(parents=True, exist_ok=True)
-    model.save(out / "model.zip")
-
-    act_space = venv.action_space
+    from gymnasium.spaces import Box
+    act_space = Box(-1.0, 1.0, model.action_space.shape, np.float32)
     rng = np.random.default_rng(cfg["seed"] + 1)
     eval_seed = 10_000 + cfg["seed"]
     results = {
@@ -126,7 +150,7 @@ def train(cfg, out: Path, quick: bool = False):
           "| policy | mean return | success rate | mean length |", "|---|---|---|---|", *rows, ""]
     (out / "results.md").write_text("\n".join(md))
     print("\n".join(md))
-    venv.close()
+    print(f"output folder: {out} (python -m training.evaluate {out}; tensorboard --logdir {out})", flush=True)
     return results
 
 
@@ -137,15 +161,27 @@ def main(argv=None):
                                                 "directory; --quick: a new temporary directory)")
     ap.add_argument("--quick", action="store_true", help="a few thousand steps: checks the pipeline, learns nothing")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config field")
+    ap.add_argument("--resume", default=None, metavar="PATH",
+                    help="go on from a checkpoint: a model_<steps>_steps.zip or a run folder (its newest checkpoint)")
+    ap.add_argument("--progress-seconds", type=float, default=30.0,
+                    help="off a terminal: seconds between progress lines (default 30)")
     args = ap.parse_args(argv)
-    cfg = load_config(args.config, args.set)
+    try:
+        cfg = load_config(args.config, args.set)
+        if args.resume is not None:
+            from training.runner import latest_checkpoint
+            latest_checkpoint(args.resume)
+        if not args.progress_seconds > 0:
+            raise ValueError(f"--progress-seconds must be positive, got {args.progress_seconds}")
+    except ValueError as exc:
+        ap.error(str(exc))
     if args.out:
         out = Path(args.out).resolve()
     elif args.quick:  # a quick run checks the pipeline: it never writes over a real run
         out = Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / Path(args.config).stem
     else:
         out = (Path("runs") / Path(args.config).stem).resolve()
-    return train(cfg, out, quick=args.quick)
+    return train(cfg, out, quick=args.quick, resume=args.resume, progress_seconds=args.progress_seconds)
 
 
 if __name__ == "__main__":

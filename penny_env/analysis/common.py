@@ -128,15 +128,16 @@ def table(headers: list[str], rows: list[list]) -> list[str]:
 def report_path(out: str | None, quick: bool, name: str) -> Path:
     """Where a report command writes its Markdown file (its PNGs go next to it).
 
-    ``--out`` when given (a path relative to the working directory, as any command-line path). Without
-    it a ``--quick`` run writes into a new temporary directory, so that quick runs never overwrite the
-    committed reports; a full run writes ``docs/<name>`` under the working directory (the repository
-    root regenerates the committed report)."""
+    ``--out`` when given (a path relative to the working directory, as any command-line path;
+    ``--out docs/<name>`` from the repository root regenerates the committed report). Without it a
+    ``--quick`` run writes into a new temporary directory and a full run into ``runs/reports/<name>``
+    under the working directory (``runs/`` is git-ignored): a run never rewrites a tracked file unless
+    asked to."""
     if out is not None:
         return Path(out).resolve()
     if quick:
         return Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / name
-    return (Path("docs") / name).resolve()
+    return (Path("runs") / "reports" / name).resolve()
 
 
 def write(path: str, lines: list[str]) -> None:

@@ -81,7 +81,7 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=2000, help="control sequences per reachable set")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None,
-                    help="Markdown report, PNGs next to it (default: docs/controllability.md under the working "
+                    help="Markdown report, PNGs next to it (default: runs/reports/controllability.md under the working "
                     "directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     if args.samples < 1:

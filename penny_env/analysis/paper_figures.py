@@ -91,7 +91,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer impacts and pennies (for tests)")
     ap.add_argument("--out", default=None,
-                    help="Markdown report, PNGs next to it (default: docs/paper_figures.md under the working "
+                    help="Markdown report, PNGs next to it (default: runs/reports/paper_figures.md under the working "
                     "directory; --quick: a new temporary directory)")
     args = ap.parse_args(argv)
     import matplotlib

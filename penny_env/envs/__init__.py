@@ -2,6 +2,8 @@
 from .scene import Scene, Task, ConfigError, ConfigTypeError, resolve
 from .penny_env import PennyEnv
 from .vector_env import PennyVectorEnv
-from .registration import register_envs, env_ids
+from .goal_env import PennyGoalEnv
+from .registration import register_envs, env_ids, make_env
 
-__all__ = ["Scene", "Task", "ConfigError", "ConfigTypeError", "resolve", "PennyEnv", "PennyVectorEnv", "register_envs", "env_ids"]
+__all__ = ["Scene", "Task", "ConfigError", "ConfigTypeError", "resolve", "PennyEnv", "PennyGoalEnv", "PennyVectorEnv",
+           "register_envs", "env_ids", "make_env"]

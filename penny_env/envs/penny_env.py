@@ -16,6 +16,7 @@ from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
+MAX_IMPACTS_IN_INFO = 8  # width of info["impact_times"] / ["impact_ends"] (as PennyVectorEnv's rows)
 
 
 def _action_list(action, n_act):
@@ -111,9 +112,13 @@ class PennyEnv(gym.Env):
     ==================  ==========================================================================
     key                 value
     ==================  ==========================================================================
-    ``impacts``         count of impacts inside the step
-    ``impact_times``    tuple of every impact's time since the step's start [s]
-    ``impact_ends``     tuple of +1 (front end) / -1 (back end)
+    ``impacts``         count of impacts inside the step (exact)
+    ``impact_times``    (max_impacts_in_info,) float64: the first impacts' times since the step's
+                        start [s], then 0.0 (a fixed shape, so that TorchRL and gymnasium's vector
+                        envs can batch it; padded with 0, not NaN as the vector env's rows, because
+                        gymnasium's check_env compares infos with allclose)
+    ``impact_ends``     (max_impacts_in_info,) int8: +1 (front end) / -1 (back end), then 0: the
+                        first min(impacts, max_impacts_in_info) entries are the impacts
     ``kinetic_energy``  [J] after the step
     ``time``            simulated time since reset [s]
     ``distance``        contact point to target [m]
@@ -134,6 +139,9 @@ class PennyEnv(gym.Env):
     **Interrupted steps.** A step interrupted by an exception (KeyboardInterrupt) may leave its
     bookkeeping half done; the next step() then raises ResetNeeded until reset() is called.
 
+    ``reset`` returns the same keys (no impacts, ``is_success`` False). ``max_impacts_in_info``
+    (default 8) sets the width of the impact arrays; a larger one keeps more of a step's impacts.
+
     **Determinism.** ``reset(seed=k)`` then the same actions give bitwise the same episode;
     later ``reset()`` calls draw the next episodes of the same seed (see core.py). The env pickles.
     """
@@ -141,10 +149,15 @@ class PennyEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
 
     def __init__(self, scene="ellipse", task="reach", render_mode: str | None = None, backend="auto",
-                 truncate: bool = True, **overrides):
+                 truncate: bool = True, max_impacts_in_info: int = MAX_IMPACTS_IN_INFO, **overrides):
         self.scene, self.task = resolve(scene, task, **overrides)
         if not isinstance(truncate, bool):
             raise TypeError(f"truncate must be a bool, got {type(truncate).__name__}")
+        if isinstance(max_impacts_in_info, bool) or not isinstance(max_impacts_in_info, (int, np.integer)):
+            raise TypeError(f"max_impacts_in_info must be an integer, got {type(max_impacts_in_info).__name__}")
+        if max_impacts_in_info < 0:
+            raise ValueError(f"max_impacts_in_info must be >= 0, got {max_impacts_in_info}")
+        self.max_impacts_in_info = int(max_impacts_in_info)
         self.backend = backend
         self.truncate = truncate
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -234,7 +247,7 @@ class PennyEnv(gym.Env):
         self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
         obs = np.empty((1, core.obs_dim), dtype=np.float32)
         self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
-        info = {"kinetic_energy": kinetic_energy(self._s, self._p), "time": 0.0, "distance": self._d}
+        info = self._info(0, (), (), kinetic_energy(self._s, self._p), False)
         if self.render_mode == "human":
             self.render()
         return obs[0], info
@@ -269,11 +282,7 @@ class PennyEnv(gym.Env):
             times, ends = tuple(self._times[0, :n_imp].tolist()), tuple(self._ends[0, :n_imp].tolist())
         else:
             times = ends = ()
-        info = {"impacts": n_imp, "impact_times": times, "impact_ends": ends,
-                "kinetic_energy": energy, "time": self._t, "distance": d,
-                "is_success": terminated, "limit": limit}
-        if c.impacts:
-            info["arc_impacts"] = self._count
+        info = self._info(n_imp, times, ends, energy, terminated, limit)
         if terminated or truncated:
             self._done = True
         self._in_step = False
@@ -285,6 +294,19 @@ class PennyEnv(gym.Env):
             if self.render_mode == "human":
                 self.render()
         return obs[0], float(reward), terminated, truncated, info
+
+    def _info(self, n_imp, times, ends, energy, success, limit=0):
+        """The step's info: every key on every step and reset, fixed shapes (see the class docstring)."""
+        k = self.max_impacts_in_info
+        impact_times, impact_ends = np.zeros(k), np.zeros(k, dtype=np.int8)
+        impact_times[:min(n_imp, k)] = times[:k]
+        impact_ends[:min(n_imp, k)] = ends[:k]
+        info = {"impacts": n_imp, "impact_times": impact_times, "impact_ends": impact_ends,
+                "kinetic_energy": energy, "time": self._t, "distance": self._d, "is_success": success,
+                "limit": limit}
+        if self._core.impacts:
+            info["arc_impacts"] = self._count
+        return info
 
     def _impacts_for_render(self, s, a0, a1, times, elapsed):
         """(time since reset, end, post-impact state) of the step's impacts, for the renderer's flashes: the
