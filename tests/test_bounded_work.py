@@ -90,7 +90,7 @@ def test_impacts_per_step_are_capped_and_end_the_episode():
     # a table with a 10 s control period reached hundreds of thousands of impacts per step (seconds
     # per step); a step now stops at the event cap, the episode ends with info["limit"] == "impacts",
     # the state and time those right after the cap's impact (elapsed < control_dt)
-    env = PennyEnv("ellipse", "reach", actuation="drive", truncate=False, **_fast_scene())
+    env = PennyEnv("ellipse", "reach", actuation="drive", truncate=False, max_impacts_in_info=CAP, **_fast_scene())
     vec = PennyVectorEnv(2, "ellipse", "reach", actuation="drive", max_episode_steps=10**9, **_fast_scene())
     env.reset(seed=1)
     vec.reset(seed=[1, 1])
