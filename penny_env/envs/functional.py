@@ -351,8 +351,14 @@ def compiled_env_functions(kind: int) -> dict:
     # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
     namespace["env_step"] = copy(env_step, inline)
     namespace["step_envs"] = copy(step_envs, numba.njit(parallel=True, cache=own))
+    def serial_step_envs():  # for a child forked after OpenMP ran: the same loop without prange's threads
+        serial = dict(namespace)
+        serial["step_envs"] = compiled.jit_copy(step_envs, serial, jit, f"{variant}_serial")
+        return compiled.jit_copy(step_envs_packed, serial, jit, f"{variant}_serial")
+
     _COMPILED[key] = {"env_step": single,
-                      "step_envs": parallel.locked(copy(step_envs_packed)),  # one parallel call at a time
+                      # one parallel call at a time
+                      "step_envs": parallel.locked(copy(step_envs_packed), serial_step_envs),
                       "observe_rows": copy(observe_rows_packed),
                       "initial_observation": copy(initial_observation_packed)}
     return _COMPILED[key]

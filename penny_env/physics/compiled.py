@@ -25,6 +25,7 @@ code on disk (``cache=True``).
 from __future__ import annotations
 
 import builtins
+import functools
 import importlib
 import importlib.util
 import math
@@ -346,7 +347,9 @@ def compiled_functions(kind: int) -> dict:
     namespace["_angle_trig"] = copy(_angle_trig)
     parallel = numba.njit(parallel=True, cache=own)
     for f in (_advance_batch, _flow_batch, _first_impact_batch):  # called under parallel.PARALLEL_LOCK
-        fns[f.__name__] = parallel_setup.locked(copy(f, parallel))
+        # serially in a child forked after OpenMP ran (its own name: never the parallel copy's cache files)
+        serial = functools.partial(jit_copy, f, namespace, jit, f"{variant}_serial")
+        fns[f.__name__] = parallel_setup.locked(copy(f, parallel), serial)
     _COMPILED[key] = fns
     return fns
 

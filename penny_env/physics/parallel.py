@@ -1,24 +1,30 @@
-"""The threading setup of the compiled parallel loops (numba ``prange``): which threading layer, and
-one lock around every parallel call.
+"""The threading setup of the compiled parallel loops (numba ``prange``): which threading layer, how its
+idle threads wait, one lock around every parallel call, and a serial path in forked children.
 
 Deployed, the vector env and the batch API meet three things the parallel loop must survive:
 
-* a learner on the same cores (SB3, torch): GNU OpenMP's idle threads spin (OMP_WAIT_POLICY active),
-  and a parallel step beside one busy process ran 6 to 8 times slower than with threads that sleep;
-* ``fork()`` after a parallel call (multiprocessing's default start method on Linux, SubprocVecEnv
-  with "fork", Ray workers): a child that runs GNU OpenMP again is terminated ("fork() called from a
-  process already using GNU OpenMP, this is unsafe");
-* two Python threads stepping two vector envs: numba's workqueue layer aborts the process on
-  concurrent use (it is not thread-safe).
+* a learner on the same cores (SB3, torch): GNU OpenMP's idle threads spin (OMP_WAIT_POLICY active), and
+  a parallel step beside one busy process ran several times slower than with threads that sleep;
+* ``fork()`` after a parallel call (multiprocessing's default start method on Linux, SubprocVecEnv with
+  "fork", Ray workers): a child that runs GNU OpenMP again is terminated ("fork() called from a process
+  already using GNU OpenMP, this is unsafe");
+* two Python threads stepping two vector envs: numba's workqueue layer (the one numba uses where OpenMP is
+  missing, as in macOS wheels) aborts the process on concurrent use.
 
-numba's own workqueue layer sleeps when idle and is fork-safe; :data:`PARALLEL_LOCK` serialises
-penny_env's parallel calls from several Python threads, so its one unsafe case never happens (and a
-parallel call already uses every core, so taking turns loses nothing). :func:`configure` therefore picks
-the workqueue layer, unless the user chose one (NUMBA_THREADING_LAYER in the environment, or
-``numba.config.THREADING_LAYER`` set) or numba's threads already run (the layer is then fixed for the
-process). The layer is process-wide: it also runs the user's own ``parallel=True`` functions, which
-must then not be called from several threads at once (TBB is the layer that allows it: install tbb and
-set NUMBA_THREADING_LAYER=tbb). tests/test_parallel.py checks all three cases.
+What penny_env does (docs/contention.md measures the alternatives side by side):
+
+* the layer stays numba's default choice (TBB where it loads, else OpenMP, else workqueue): on a quiet
+  machine workqueue ran the vector step about 40 % slower than OpenMP;
+* :func:`configure` sets ``OMP_WAIT_POLICY=passive`` unless the user set it, before numba starts its
+  threads (GNU OpenMP reads it when numba loads it): idle threads sleep instead of spinning, which costs a
+  few per cent on a quiet machine and keeps the step from collapsing beside a busy process;
+* :data:`PARALLEL_LOCK` serialises penny_env's parallel calls from several Python threads, so workqueue's
+  unsafe case never happens (a parallel call already uses every core, so taking turns loses nothing);
+* a child forked after the parent launched OpenMP's threads runs penny_env's loops serially (the same
+  functions compiled without ``parallel``, bitwise the same results; :func:`locked`), since GNU OpenMP
+  cannot run there. Forked workers usually step one env each, so they lose little.
+
+tests/test_parallel.py checks all three cases. What remains is in README.md ("Deployment").
 """
 from __future__ import annotations
 
@@ -26,25 +32,57 @@ import os
 import threading
 
 PARALLEL_LOCK = threading.RLock()  # held around every call of a compiled parallel (prange) function
-LAYER = "workqueue"
+WAIT_POLICY = "passive"
+_FORKED_AFTER_OPENMP = False  # this process is a fork() child of one whose OpenMP threads were running
+
+
+def openmp_running() -> bool:
+    """numba's threads are launched on its OpenMP layer in this process."""
+    from numba.np.ufunc import parallel
+    if not getattr(parallel, "_is_initialized", False):
+        return False
+    import numba
+    try:
+        return numba.threading_layer() == "omp"
+    except ValueError:
+        return False
+
+
+def _after_fork_in_child() -> None:
+    global _FORKED_AFTER_OPENMP
+    try:
+        _FORKED_AFTER_OPENMP = _FORKED_AFTER_OPENMP or openmp_running()
+    except Exception:  # noqa: BLE001 (never break a fork over this)
+        _FORKED_AFTER_OPENMP = True
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def configure() -> None:
-    """Pick the workqueue threading layer for numba's parallel loops if nothing chose one yet (see the
-    module docstring). Called before any penny_env parallel function is compiled or run."""
-    import numba
-    from numba.np.ufunc import parallel
-
-    if "NUMBA_THREADING_LAYER" in os.environ or numba.config.THREADING_LAYER != "default":
-        return
-    if getattr(parallel, "_is_initialized", False):  # threads launched: the layer is fixed
-        return
-    numba.config.THREADING_LAYER = LAYER
+    """Let OpenMP's idle threads sleep (OMP_WAIT_POLICY=passive unless the user set it) before numba launches
+    its threads. Called before any penny_env parallel function is compiled or run. The threading layer is
+    left to the user (NUMBA_THREADING_LAYER) or numba's default order."""
+    os.environ.setdefault("OMP_WAIT_POLICY", WAIT_POLICY)
 
 
-def locked(f):
-    """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads)."""
+def serial_now() -> bool:
+    """Run penny_env's loops serially: this is a child forked after OpenMP ran (see the module docstring)."""
+    return _FORKED_AFTER_OPENMP
+
+
+def locked(f, serial=None):
+    """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads); in a
+    child forked after OpenMP ran, ``serial()`` (the same function compiled without ``parallel``, built on
+    first use) instead."""
+    built = []
+
     def call(*args):
+        if serial is not None and _FORKED_AFTER_OPENMP:
+            if not built:
+                built.append(serial())
+            return built[0](*args)
         with PARALLEL_LOCK:
             return f(*args)
     call.__name__ = getattr(f, "__name__", "call")
