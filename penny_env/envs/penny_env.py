@@ -299,8 +299,9 @@ class PennyEnv(gym.Env):
         """The step's info: every key on every step and reset, fixed shapes (see the class docstring)."""
         k = self.max_impacts_in_info
         impact_times, impact_ends = np.zeros(k), np.zeros(k, dtype=np.int8)
-        impact_times[:min(n_imp, k)] = times[:k]
-        impact_ends[:min(n_imp, k)] = ends[:k]
+        if n_imp:  # (most steps have none: the slice assignments cost as much as the compiled step)
+            impact_times[:min(n_imp, k)] = times[:k]
+            impact_ends[:min(n_imp, k)] = ends[:k]
         info = {"impacts": n_imp, "impact_times": impact_times, "impact_ends": impact_ends,
                 "kinetic_energy": energy, "time": self._t, "distance": self._d, "is_success": success,
                 "limit": limit}
