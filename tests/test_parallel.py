@@ -27,16 +27,18 @@ FORK = """
     import numpy as np
     import gymnasium as gym
     import penny_env, penny_env.batch as pb
+    from penny_env.physics.parallel import SERIAL_BELOW
+    N = SERIAL_BELOW  # enough pennies for the parallel loops (fewer run on the calling thread)
 
     def use(seed):
-        v = gym.make_vec("PennyReach-Plane-v0", num_envs=64)
+        v = gym.make_vec("PennyReach-Plane-v0", num_envs=N)
         v.reset(seed=seed)
         for _ in range(5):
-            v.step(np.full((64, 2), 0.5, dtype=np.float32))
-        S = np.zeros((8, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, 8)
+            v.step(np.full((N, 2), 0.5, dtype=np.float32))
+        S = np.zeros((N, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, N)
         res = pb.simulate(S, table={"kind": "circle", "r": 0.2}, law="elastic", t_final=0.3)
-        assert res.final_states.shape == (8, 6)
-        return np.concatenate([v.step(np.full((64, 2), 0.5, dtype=np.float32))[0].ravel(), res.final_states.ravel()])
+        assert res.final_states.shape == (N, 6)
+        return np.concatenate([v.step(np.full((N, 2), 0.5, dtype=np.float32))[0].ravel(), res.final_states.ravel()])
 
     use(0)  # the parent has run the parallel loops (vector env and batch)
     import numba
@@ -51,8 +53,11 @@ FORK = """
         finally:
             os._exit(0)
     os.close(w)
+    chunks = []  # read to the end before waiting: the child blocks while the pipe is full
+    while chunk := os.read(r, 1 << 16):
+        chunks.append(chunk)
     _, status = os.waitpid(pid, 0)
-    serial, hexobs = os.read(r, 1 << 24).decode().split()
+    serial, hexobs = b"".join(chunks).decode().split()
     print("child exit", os.waitstatus_to_exitcode(status), "serial", serial)
     print("child equals parent", bytes.fromhex(hexobs) == use(1).tobytes())
 """
@@ -75,16 +80,18 @@ THREADS = """
     import numba
     import penny_env, penny_env.batch as pb
 
-    envs = [gym.make_vec("PennyReach-Plane-v0", num_envs=256) for _ in range(2)]
+    from penny_env.physics.parallel import SERIAL_BELOW
+    N = SERIAL_BELOW  # enough pennies for the parallel loops (fewer run on the calling thread)
+    envs = [gym.make_vec("PennyReach-Plane-v0", num_envs=N) for _ in range(2)]
     errors = []
 
     def run(v, seed):
         try:
             v.reset(seed=seed)
-            a = np.full((256, 2), 0.3, dtype=np.float32)
+            a = np.full((N, 2), 0.3, dtype=np.float32)
             for _ in range(200):
                 v.step(a)
-            S = np.zeros((16, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, 16)
+            S = np.zeros((N, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, N)
             for _ in range(20):
                 pb.simulate(S, table={"kind": "circle", "r": 0.2}, law="elastic", t_final=0.2)
         except Exception as exc:  # noqa: BLE001
@@ -115,7 +122,10 @@ def test_two_python_threads_step_two_vector_envs_and_batches_at_once(layer):
 def test_the_users_threading_layer_choice_is_kept():
     code, out = run_script("""
         import numba, numpy as np, gymnasium as gym, penny_env
-        gym.make_vec("PennyReach-Plane-v0", num_envs=4).reset(seed=0)
+        from penny_env.physics.parallel import SERIAL_BELOW  # (fewer pennies run on the calling thread)
+        v = gym.make_vec("PennyReach-Plane-v0", num_envs=SERIAL_BELOW)
+        v.reset(seed=0)
+        v.step(np.zeros((SERIAL_BELOW, 2), dtype=np.float32))
         print("layer", numba.threading_layer())
     """, NUMBA_THREADING_LAYER="omp")
     if code != 0 and "threading layer" in out and "omp" in out.lower() and "could not" in out.lower():

@@ -365,7 +365,7 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m training.witness_study", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--pairs", type=positive_int("--pairs"), default=30, help="start/target pairs per cell")
+    ap.add_argument("--pairs", type=positive_int("--pairs"), default=200, help="start/target pairs per cell")
     ap.add_argument("--theorem-pairs", type=positive_int("--theorem-pairs"), default=5,
                     help="pairs in the cells a theorem declares impossible (a consistency check)")
     ap.add_argument("--seed", type=positive_int("--seed", 0), default=0, help="first pair's seed")

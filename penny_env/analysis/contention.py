@@ -62,7 +62,11 @@ for r in range(repeats):
         venv.step(a)
     best = max(best, n * steps / (time.perf_counter() - t0))
 import numba
-print(json.dumps({"rate": best, "layer": numba.threading_layer(), "threads": numba.get_num_threads()}))
+try:
+    layer = numba.threading_layer()
+except ValueError:  # no parallel call ran: fewer pennies than parallel.SERIAL_BELOW run on the calling thread
+    layer = "serial"
+print(json.dumps({"rate": best, "layer": layer, "threads": numba.get_num_threads()}))
 """
 
 _BUSY = "while True:\n    pass\n"

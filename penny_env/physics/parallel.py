@@ -22,7 +22,9 @@ What penny_env does (docs/contention.md measures the alternatives side by side):
   unsafe case never happens (a parallel call already uses every core, so taking turns loses nothing);
 * a child forked after the parent launched OpenMP's threads runs penny_env's loops serially (the same
   functions compiled without ``parallel``, bitwise the same results; :func:`locked`), since GNU OpenMP
-  cannot run there. Forked workers usually step one env each, so they lose little.
+  cannot run there. Forked workers usually step one env each, so they lose little;
+* so do calls with fewer than :data:`SERIAL_BELOW` pennies, where waking the sleeping threads would cost
+  more than the work.
 
 tests/test_parallel.py checks all three cases. What remains is in README.md ("Deployment").
 """
@@ -33,6 +35,10 @@ import threading
 
 PARALLEL_LOCK = threading.RLock()  # held around every call of a compiled parallel (prange) function
 WAIT_POLICY = "passive"
+# pennies per call below which the loop runs on the calling thread: waking OpenMP's sleeping threads took
+# about 65 us per call on 2 cores (make_vec PennyReach-Ellipse-v0: 1.5 M env-steps/s at N = 256 against
+# 2.6 M with spinning threads), about what one core needs for 150 pennies' steps
+SERIAL_BELOW = 512
 _FORKED_AFTER_OPENMP = False  # this process is a fork() child of one whose OpenMP threads were running
 
 
@@ -73,13 +79,14 @@ def serial_now() -> bool:
 
 
 def locked(f, serial=None):
-    """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads); in a
-    child forked after OpenMP ran, ``serial()`` (the same function compiled without ``parallel``, built on
-    first use) instead."""
+    """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads), whose
+    first argument's last axis counts the pennies. ``serial()`` (the same function compiled without
+    ``parallel``, built on first use) runs instead in a child forked after OpenMP ran, and for fewer than
+    :data:`SERIAL_BELOW` pennies, where waking the sleeping threads costs more than the work they share."""
     built = []
 
     def call(*args):
-        if serial is not None and _FORKED_AFTER_OPENMP:
+        if serial is not None and (_FORKED_AFTER_OPENMP or args[0].shape[-1] < SERIAL_BELOW):
             if not built:
                 built.append(serial())
             return built[0](*args)
