@@ -155,15 +155,20 @@ class PennyVectorEnv(VectorEnv):
         c = self._core
         announce_compile("vector env step", "open plane" if c.table is None else type(c.table).__name__, self._m.kind,
                          self._fns["step_envs"].__wrapped__)
-        S = np.zeros((6, 1))
-        trig = np.zeros((4, 1))
-        obs = np.empty((1, c.obs_dim), dtype=np.float32)
-        ints = lambda: np.zeros(1, dtype=np.int64)  # noqa: E731
-        self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S, trig, np.zeros((2, 1)), ints(), self._consts, obs)
-        self._fns["step_envs"](S, trig, np.zeros((1, 2)), np.zeros(1, dtype=bool), np.zeros((2, 1)), np.zeros((2, 1)),
-                               ints(), np.zeros(1), ints(), np.zeros(1), self._consts, obs, np.zeros(1),
-                               np.zeros(1, dtype=bool), np.zeros(1, dtype=bool), ints(),
-                               np.zeros((1, 1)), np.zeros((1, 1), dtype=np.int8), np.zeros(1), np.zeros(1, dtype=np.int8))
+        from ..physics.parallel import SERIAL_BELOW, serial_now
+        # both loops: one penny runs on the calling thread, SERIAL_BELOW in parallel (not in a forked child)
+        for n in (1,) if serial_now() else (1, SERIAL_BELOW):
+            S = np.zeros((6, n))
+            trig = np.zeros((4, n))
+            obs = np.empty((n, c.obs_dim), dtype=np.float32)
+            ints = lambda: np.zeros(n, dtype=np.int64)  # noqa: E731
+            self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S[:, :1], trig[:, :1], np.zeros((2, 1)), ints()[:1],
+                                      self._consts, obs[:1])
+            self._fns["step_envs"](S, trig, np.zeros((n, 2)), np.zeros(n, dtype=bool), np.zeros((2, n)),
+                                   np.zeros((2, n)), ints(), np.zeros(n), ints(), np.zeros(n), self._consts, obs,
+                                   np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), ints(),
+                                   np.zeros((n, 1)), np.zeros((n, 1), dtype=np.int8), np.zeros(n),
+                                   np.zeros(n, dtype=np.int8))
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):

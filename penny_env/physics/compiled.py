@@ -426,10 +426,13 @@ class CompiledBatch:
         batch = self._fns["_flow_batch" if self.plane else "_advance_batch"]
         announce_compile("compiled batch", "open plane" if self.plane else type(self.table).__name__, self.model.kind,
                          batch.__wrapped__)
-        S = np.zeros((6, 1))
-        S[4] = 1.0
-        zero = np.zeros(1)
-        self.states_and_impacts(S, zero, zero, 1e-9)
+        from .parallel import SERIAL_BELOW, serial_now
+        # both loops: one penny runs on the calling thread, SERIAL_BELOW in parallel (not in a forked child)
+        for n in (1,) if serial_now() else (1, SERIAL_BELOW):
+            S = np.zeros((6, n))
+            S[4] = 1.0
+            zero = np.zeros(n)
+            self.states_and_impacts(S, zero, zero, 1e-9)
         if not self.plane:
             self._fns["advance_through_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model)
 
