@@ -88,7 +88,13 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     acc1, acc2 = _controls(controls, n, params)
     h = _times(horizon, n, "horizon")
     settings = check_settings(settings)
-    return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=_backend(backend))
+    if _backend(backend) == "cuda":
+        from .physics.compiled import CompiledBatch
+        from .physics.laws import ImpactLaw
+        from .physics.pennies import FIRST_IMPACT_ROUNDS
+        return CompiledBatch(params, tab, ImpactLaw("elastic", 1.0), settings, target=_cuda_target()).first_impacts(
+            S, acc1, acc2, h, FIRST_IMPACT_ROUNDS)
+    return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=backend)
 
 
 def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray:
@@ -137,16 +143,32 @@ class BatchResult:
 
 
 def _backend(backend):
-    if backend not in ("auto", "numba", "python"):
-        raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
+    if backend not in ("auto", "numba", "python", "cuda"):
+        raise ValueError(f"backend must be 'auto', 'numba', 'python' or 'cuda', got {backend!r}")
     return backend
+
+
+def _cuda_target():
+    """'cuda', checked: numba-cuda installed and a GPU (or its simulator) usable, else ValueError."""
+    import importlib.util
+
+    from .physics.builder import cuda_available
+    if importlib.util.find_spec("numba_cuda") is None:
+        raise ValueError("backend='cuda' needs numba-cuda: pip install 'penny-env[cuda]'")
+    if not cuda_available():
+        raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
+    return "cuda"
 
 
 def _stepper(params, table, law, settings, backend):
     """The event loop over one interval for (6, N) states: (new S, None or (env, time, end, post))."""
-    from .physics.compiled import CompiledBatch, choose_backend
+    from .physics.compiled import CompiledBatch, choose_backend, compiles
 
-    if choose_backend(_backend(backend), params, table, law, settings, python="python") == "numba":
+    if _backend(backend) == "cuda":
+        if not compiles(table):
+            raise ValueError(f"backend='cuda': table {type(table).__name__} has no compiled formulas")
+        return CompiledBatch(params, table, law, settings, target=_cuda_target()).states_and_impacts
+    if choose_backend(backend, params, table, law, settings, python="python") == "numba":
         return CompiledBatch(params, table, law, settings).states_and_impacts
 
     def step(S, acc1, acc2, dt):
@@ -161,7 +183,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     never over pennies). controls: None (free motion), (K, 2) torques shared by all pennies or
     (K, N, 2) per penny, row k held on [k, k+1) control_dt; K control_dt must cover t_final.
     backend: "numba" runs the physics' per-penny event loop compiled and in parallel over the pennies
-    (physics/compiled.py), "python" the same loop in plain Python (slow: for debugging and tests);
+    (physics/compiled.py), "cuda" the same functions on a GPU, one thread per penny (numpy in and out,
+    copied each interval; docs/gpu.md), "python" the same loop in plain Python (slow: for debugging and tests);
     "auto" (default) takes numba where it is installed and the table compiles (with a one-time
     warning otherwise). Both give bitwise the same results (tests/test_compiled.py)."""
     params = check_params(params)

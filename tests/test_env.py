@@ -114,12 +114,11 @@ def test_impacts_happen_with_random_actions():
 
 def test_open_plane_never_searches(monkeypatch):
     # the open plane is one flow per step: the step never calls the certificate or the event loop
-    import penny_env.envs.functional as functional
+    from penny_env.physics import scalar
     calls = []
     record = lambda *a, **k: calls.append(1)  # noqa: E731
-    monkeypatch.setattr(functional, "certified_free_trig", record)
-    monkeypatch.setattr(functional, "advance_m", record)
-    monkeypatch.setattr(functional, "advance_through_m", record)
+    for name in ("certified_free_trig", "advance_into", "advance_through_into"):  # run_interval's callees
+        monkeypatch.setattr(scalar, name, record)
     env = gym.make("PennyReach-Plane-v0", backend="python")
     env.reset(seed=0)
     for _ in range(50):  # (unseeded random actions may reach the target: start the next episode)

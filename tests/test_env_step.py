@@ -47,6 +47,8 @@ def _step_setup(table_cfg, law, dt):
 @pytest.mark.parametrize("ti", range(3))
 @pytest.mark.parametrize("law", ["elastic", "plastic", 0.5])
 def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
+    # the env step's interval (scalar.run_interval, one call, as env_step drives it) is the event loop's
+    # call, and a period the certificate shows free is one flow
     core, p, m = _step_setup(TABLES[ti], law, 0.05)
     rng = np.random.default_rng(10 + ti)
     states = _random_inside(rng, core.table, 150)
@@ -54,12 +56,13 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
     for s in states:
         acc1 = 0.0 if rng.random() < 0.5 else rng.normal() * 40
         acc2 = rng.normal() * 20
-        times, ends = np.full((1, 64), np.nan), np.zeros((1, 64), dtype=np.int64)
-        s1, n, _, _ = functional.transition(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p, m, core.k, 1.0, 0.0,
-                                         times, ends, 0)
-        times, ends = times[0], ends[0]
+        buf = scalar.impact_buffers(1, 64)
+        s1, elapsed1 = scalar.run_interval(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p.dt, m, False, False, 0, buf,
+                                           0, scalar.NO_ARC)
+        n = int(buf.count[0])
+        times, ends = buf.time[0], buf.end[0]
         ref, imps, _, elapsed = scalar.advance_m(s, acc1, acc2, p.dt, m, 0)
-        assert np.array_equal(_bits(s1), _bits(ref)) and n == len(imps) and elapsed == p.dt
+        assert np.array_equal(_bits(s1), _bits(ref)) and n == len(imps) and elapsed == p.dt == elapsed1
         assert np.array_equal(_bits(times[:n]), _bits([i[0] for i in imps])) and list(ends[:n]) == [i[1] for i in imps]
         if scalar.certified_free1(s, acc1, acc2, p.dt, m):
             certified += 1
@@ -68,32 +71,37 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
     assert 0 < certified < len(states) and impacts > 5
 
 
+def _penny_state(s, target=(0.01, 0.0)):
+    return functional.PennyState(s, functional.angle_trig(s), target, (1.0, 0.0), 0, 0.05, 0, 0.0)
+
+
 def test_transition_stops_where_the_event_cap_stops_the_loop(monkeypatch):
-    # physics.scalar.advance_m stops after its per-call event cap (m.max_events impacts) with elapsed <
-    # the time asked: the step does no more work (bounded work per step, issue 24.4), returns that
-    # call's state and impacts, the motion up to there unaltered, and the elapsed time
+    # the event loop's call (scalar.advance_into) stops after its per-call event cap (m.max_events impacts)
+    # with elapsed < the time asked: the step does no more work (bounded work per step, issue 24.4), returns
+    # that call's state and impacts, the motion up to there unaltered, the elapsed time, LIMIT_IMPACTS
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
+    p = p._replace(n_act=2, gain2=3.0)  # action (0, 1): acc1 = 0, acc2 = 3 exactly
     rng = np.random.default_rng(3)
     calls = []
-    advance_m = scalar.advance_m
+    advance_into = scalar.advance_into
 
-    def one_impact_per_call(s, acc1, acc2, dt, m, stop_after):
+    def one_impact_per_call(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
         calls.append(dt)
-        return advance_m(s, acc1, acc2, dt, m, 1)
+        return advance_into(s, acc1, acc2, dt, m, 1, buf, row, base, arc)
 
     checked = 0
     for s in _random_inside(rng, core.table, 20):
         s = s[:4] + (30.0, s[5])
-        ref, imps, _, elapsed = advance_m(s, 0.0, 3.0, p.dt, m, 1)
+        ref, imps, _, elapsed = scalar.advance_m(s, 0.0, 3.0, p.dt, m, 1)
         with monkeypatch.context() as mp:
-            mp.setattr(functional, "advance_m", one_impact_per_call)
-            times1, ends1 = np.zeros((1, 200)), np.zeros((1, 200), dtype=np.int64)
+            mp.setattr(scalar, "advance_into", one_impact_per_call)
+            buf = scalar.impact_buffers(1, 200)
             calls.clear()
-            got = functional.transition(s, math.cos(s[3]), math.sin(s[3]), 0.0, 3.0, p, m, core.k, 1.0, 0.0,
-                                        times1, ends1, 0)
-        assert len(calls) == 1 and got[1] == 1 and len(imps) == 1 and elapsed < p.dt
-        assert np.array_equal(_bits(got[0]), _bits(ref)) and got[3] == elapsed
-        assert times1[0, 0] == imps[0][0] and ends1[0, 0] == imps[0][1]
+            new, _, _, _, truncated, _, limit = functional.env_step(_penny_state(s), 0.0, 1.0, p, m, core.k, buf, 0)
+        assert len(calls) == 1 and buf.count[0] == 1 and len(imps) == 1 and elapsed < p.dt
+        assert np.array_equal(_bits(new.s), _bits(ref)) and new.time == elapsed
+        assert truncated and limit == functional.LIMIT_IMPACTS
+        assert buf.time[0, 0] == imps[0][0] and buf.end[0, 0] == imps[0][1]
         checked += 1
     assert checked == 20
 
@@ -112,18 +120,18 @@ def test_compiled_step_truncates_a_capped_period_as_the_plain_step_does():
     checked = 0
     for s in _random_inside(rng, core.table, 20):
         s = s[:4] + (30.0, s[5])
-        trig = (math.cos(s[2]), math.sin(s[2]), math.cos(s[3]), math.sin(s[3]))
+        st = tuple(_penny_state(s))
         outs = []
         for f, model in ((fns[0], capped), (fns[1], capped), (fns[1], m)):
-            obs, times, ends = np.zeros((1, 11), np.float32), np.full((1, 64), np.nan), np.zeros((1, 64), np.int64)
-            out = f(s, trig, 0.2, 0.9, 0.01, 0.0, 1.0, 0.0, 0, 0.05, 0, functional.pack(p, model, core.k), obs, times, ends)
-            outs.append((out, obs, times, ends))
-        (a, obs_a, t_a, e_a), (b, obs_b, t_b, e_b), (free, _, t_f, _) = outs
-        assert np.array_equal(_bits(a[0]), _bits(b[0])) and a[1:] == b[1:]
-        assert np.array_equal(obs_a, obs_b) and np.array_equal(_bits(t_a), _bits(t_b)) and np.array_equal(e_a, e_b)
-        assert free[2] > 2 and free[9] == functional.LIMIT_NONE and free[10] == p.dt and not free[7]
-        assert b[2] == 2 and b[7] and b[9] == functional.LIMIT_IMPACTS and b[10] < p.dt
-        assert b[10] == t_b[0, 1] and np.allclose(t_b[0, :2], t_f[0, :2], rtol=0, atol=1e-12)
+            obs, buf = np.zeros((1, 11), np.float32), scalar.impact_buffers(1, 64)
+            new, *rest = f(st, 0.2, 0.9, functional.pack(p, model, core.k), obs, tuple(buf))
+            outs.append((functional.PennyState(*new), tuple(rest), obs, buf))
+        (a, ra, obs_a, buf_a), (b, rb, obs_b, buf_b), (free, rf, _, buf_f) = outs
+        assert np.array_equal(_bits(a.s), _bits(b.s)) and a[1:] == b[1:] and ra == rb
+        assert np.array_equal(obs_a, obs_b) and all(np.array_equal(x, y) for x, y in zip(buf_a, buf_b))
+        assert buf_f.count[0] > 2 and rf[4] == functional.LIMIT_NONE and free.time == p.dt and not rf[2]
+        assert buf_b.count[0] == 2 and rb[2] and rb[4] == functional.LIMIT_IMPACTS and b.time < p.dt
+        assert b.time == buf_b.time[0, 1] and np.allclose(buf_b.time[0, :2], buf_f.time[0, :2], rtol=0, atol=1e-12)
         checked += 1
     assert checked == 20
 

@@ -11,7 +11,8 @@ from penny_env.physics.compiled import available as numba_available
 from penny_env.physics.flows import kinetic_energy
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MIN_GAP
-from penny_env.physics.scalar import advance_m, advance_through_m, scalar_model
+from penny_env.physics.scalar import (NO_ARC, advance_m, advance_through_into, advance_through_m, impact_buffers, impacts_of,
+                                      overflowed, scalar_model)
 
 PARAMS = pe.PennyParams()
 ELASTIC = make_law("elastic")
@@ -99,13 +100,15 @@ def test_batch_and_env_paths_resume_after_the_cap(backend):
         tr = pe.simulate(s0, table=table, law="elastic", t_final=20.0, settings=settings)
         assert np.array_equal(tr.impact_times, res.times_of(0)) and np.array_equal(tr.final_state, res.final_states[0])
     # the single penny's loop, plain or compiled (the env step resumes the same way: tests/test_env_step.py)
-    advance = advance_through_m
+    advance = advance_through_into
     model = scalar_model(PARAMS, table, ELASTIC, settings)
     if backend == "numba":
         from penny_env.physics.compiled import compiled_functions
-        advance = compiled_functions(model.kind)["advance_through_m"]
-    s, impacts, rests, _ = advance(tuple(s0), 0.0, 0.0, 5.0, model)
-    assert len(impacts) > 2 and not rests
+        advance = compiled_functions(model.kind)["advance_through_into"]
+    buf = impact_buffers(1, 64)
+    s, elapsed = advance(tuple(s0), 0.0, 0.0, 5.0, model, 0, buf, 0, NO_ARC)
+    impacts, rests = impacts_of(buf, 0)
+    assert elapsed == 5.0 and len(impacts) > 2 and not rests and not overflowed(buf)[0]
     assert energy(s)[0] == pytest.approx(energy(s0)[0], rel=1e-13)
 
 

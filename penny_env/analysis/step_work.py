@@ -40,7 +40,7 @@ def counters(n, steps):
 
     saved = [(scalar, "end_plain1", wrap(scalar, "end_plain1", "ends")),
              (scalar, "first_impact_m", wrap(scalar, "first_impact_m", "searches")),
-             (functional, "advance_m", wrap(functional, "advance_m", "loops")),
+             (scalar, "advance_into", wrap(scalar, "advance_into", "loops")),
              (scalar, "with_curvature1", wrap(scalar, "with_curvature1", "curv"))]
     try:
         for env_id in PRESETS:
@@ -67,19 +67,20 @@ def penny_costs(n, steps):
         venv.reset(seed=0)
         venv.action_space.seed(0)
         obs = np.empty((1, venv._core.obs_dim), np.float32)
-        times, ends = np.empty((1, 64)), np.empty((1, 64), np.int64)
+        buf = tuple(scalar.impact_buffers(1, 64))
         costs, heavy = [], []
         for t in range(steps):
             a = venv.action_space.sample()
             S, trig, cnt, d, st = venv._S.copy(), venv._trig.copy(), venv._count.copy(), venv._d.copy(), venv._steps.copy()
             for i in np.flatnonzero(~venv._autoreset):  # (the envs that reset at this step take no step)
-                args = (tuple(S[:, i]), tuple(trig[:, i]), float(a[i, 0]), float(a[i, -1]), venv._target[0, i],
-                        venv._target[1, i], venv._arc[0, i], venv._arc[1, i], int(cnt[i]), d[i], int(st[i]), venv._consts,
-                        obs, times, ends)
+                state = (tuple(S[:, i]), tuple(trig[:, i]), (venv._target[0, i], venv._target[1, i]),
+                         (venv._arc[0, i], venv._arc[1, i]), int(cnt[i]), d[i], int(st[i]), venv._t[i])
+                args = (state, float(a[i, 0]), float(a[i, -1]), venv._consts, obs, buf)
                 if t == 0 and not costs:
                     fn(*args)  # the first call checks the argument types: not a penny's cost
                 t0 = time.perf_counter()
-                impacts = fn(*args)[2]
+                fn(*args)
+                impacts = int(buf[0][0])
                 costs.append(time.perf_counter() - t0)
                 if impacts > 8:
                     heavy.append(costs[-1])

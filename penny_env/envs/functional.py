@@ -3,13 +3,14 @@
 In the style of Gymnasium's functional environments (gymnasium/envs/phys2d/cartpole.py) and gymnax:
 plain floats, tuples and NamedTuples of constants, no objects. PennyEnv calls :func:`env_step` for
 its one penny; PennyVectorEnv calls :func:`step_envs`, a loop over the same :func:`env_step` (a
-numba ``prange`` when compiled). So a sub-env of the vector env and a single env run the very same
+numba ``prange`` when compiled for the CPU, a kernel with one thread per env for CUDA: physics/builder.py). So a sub-env of the vector env and a single env run the very same
 operations, bitwise.
 
 * :func:`observe`: the observation of a state (layout in PennyEnv's docstring), a tuple of floats;
   :func:`write_row` stores it as a float32 row.
-* :func:`transition`: the penny over one control period (physics/scalar.py's per-penny loop).
-* :func:`env_step`: actions -> (transition, reward, termination, truncation, observation).
+* :func:`env_step`: actions -> (the penny over one control period: physics/scalar.py's run_interval,
+  the event loop's one driver), reward, termination, truncation, observation; the state is a
+  :class:`PennyState` record, the vector env's an :class:`EnvState` of arrays.
 
 The initial states are sampled by ``Core.sample`` (numpy, counter based, see core.py): resets are
 rare, and numpy draws every resetting env at once.
@@ -20,16 +21,16 @@ functions whose globals hold the compiled physics (physics/compiled.py); uncompi
 """
 from __future__ import annotations
 
-import builtins
 import math
+import types
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import Model, advance_m, advance_through_m, certified_free_trig, flow1  # noqa: F401
-from .tasks import TaskConstants, on_arc, step_reward
+from ..physics.scalar import NO_ARC, WHOLE_WALL, ImpactBuffers, Model, clear_row, run_interval
+from .tasks import TaskConstants, step_reward
 
 XP = SCALAR      # the math namespace of tasks.py's formulas (numba_math in the compiled copies)
 prange = range   # numba.prange in the compiled copies
@@ -130,36 +131,63 @@ def initial_observation(obs, s, tx, ty, p):
     return trig
 
 
-def transition(s, c_ph, s_ph, acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row):
-    """(new state, impacts, arc impacts, elapsed) of the penny over one control period; c_ph, s_ph:
-    cos and sin of the heading s[3]. The times (since the period's start) and ends of the first
-    times.shape[1] impacts go into row `row` of times and ends; the counts are exact.
+# -- the step's records --------------------------------------------------------------------------------
+class PennyState(NamedTuple):
+    """One env between two steps, in plain floats (the single env's state, a row of :class:`EnvState`)."""
 
-    A period the certificate (scalar.certified_free_trig) shows free of impacts is one flow. Any
-    other goes through the physics' event loop (scalar.advance_m), one call: its per-call event cap
-    (m.max_events = SolverSettings.max_events_per_interval impacts) bounds the step's work. Where
-    the cap stopped it, elapsed < p.dt and the state is the one right after the cap's impact, the
-    true motion up to there (never altered); env_step then ends the episode (LIMIT_IMPACTS)."""
-    if p.plane or certified_free_trig(s, c_ph, s_ph, acc1, acc2, p.dt, m):
-        return flow1(s, acc1, acc2, p.dt, m.R), 0, 0, p.dt
-    s, impacts, _, elapsed = advance_m(s, acc1, acc2, p.dt, m, 0)
-    n_arc = 0
-    cap = times.shape[1]
-    for j in range(len(impacts)):
-        t_j, end, post = impacts[j]
-        sR = end * m.R
-        if on_arc(post[0] + sR * math.cos(post[3]), post[1] + sR * math.sin(post[3]), arc_c, arc_s, k, XP):
-            n_arc += 1
-        if j < cap:
-            times[row, j] = t_j
-            ends[row, j] = end
-    return s, len(impacts), n_arc, elapsed
+    s: tuple         # (x, y, theta, phi, theta_dot, phi_dot)
+    trig: tuple      # angle_trig(s)
+    target: tuple    # (tx, ty)
+    arc: tuple       # (cos b, sin b) of the marked arc's centre (the impacts task)
+    count: int       # arc impacts so far
+    dist: float      # distance to the target
+    steps: int       # steps so far
+    time: float      # simulated time since the reset [s]
 
 
-def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, k, times, ends, row):
-    """One step of one env: clip the actions (a1 unused with one control), advance the penny,
-    count the arc impacts, reward, termination, truncation and observation; impact times and ends
-    go into row `row` of times and ends (see transition).
+class EnvState(NamedTuple):
+    """The vector env's state, arrays over its N envs: S (6, N), trig (4, N), target (2, N), arc (2, N),
+    count (N,) int64, dist (N,), steps (N,) int64, time (N,)."""
+
+    S: object
+    trig: object
+    target: object
+    arc: object
+    count: object
+    dist: object
+    steps: object
+    time: object
+
+
+class StepResults(NamedTuple):
+    """What a step returns per env, arrays over N envs: obs (N, obs_dim) float32, reward (N,), terminated
+    and truncated (N,) bool, kinetic_energy (N,), limit (N,) int8 (a LIMIT_* code). The impacts go into
+    a scalar.ImpactBuffers (count, times, ends, ...)."""
+
+    obs: object
+    reward: object
+    terminated: object
+    truncated: object
+    kinetic_energy: object
+    limit: object
+
+
+def arc_window(st, p, k):
+    """The marked arc of scalar.record_impact for the state st: the task's arc (the impacts task), the
+    whole wall when its half-width is pi, none otherwise (nothing to count)."""
+    if not p.impacts:
+        return NO_ARC
+    if k.all_arc:
+        return (st.arc[0], st.arc[1], WHOLE_WALL[1])
+    return (st.arc[0], st.arc[1], k.cos_hw)
+
+
+def env_step(st, a0, a1, p, m, k, buf, row):
+    """One step of one env from PennyState st: clip the actions (a1 unused with one control), advance the
+    penny over the control period (scalar.run_interval, one call of the event loop: its per-call event
+    cap, m.max_events impacts, bounds the step's work; the impacts go into row ``row`` of the
+    ImpactBuffers buf, the marked arc's impacts counted there too), reward, termination, truncation and
+    observation.
 
     The step is truncated at max_steps, and where the physics reaches a documented limit (the
     episode ends, the motion is never altered): LIMIT_IMPACTS when the period needed more than the
@@ -168,9 +196,8 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     MAX_ANGULAR_SPEED). So every step does bounded work: at most m.max_events impacts, from a state
     within the speed limits.
 
-    Returns (state, trig, observation, impacts, count, distance, reward, terminated, truncated,
-    kinetic energy, limit, elapsed) with trig angle_trig(state), observation observe()'s tuple, count
-    the running arc count, limit a LIMIT_* code and elapsed the simulated time of the step."""
+    Returns (new PennyState, observation (observe()'s tuple), reward, terminated, truncated, kinetic
+    energy, limit)."""
     a0 = clip_action(a0)
     if p.n_act == 2:
         a1 = clip_action(a1)
@@ -179,116 +206,117 @@ def env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, p, m, 
     else:
         acc1, acc2 = (a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2)
         ctrl = (a0 * a0) / 1
-    s1, n_imp, n_arc, elapsed = transition(s, trig[2], trig[3], acc1, acc2, p, m, k, arc_c, arc_s, times, ends, row)
+    s1, elapsed = run_interval(st.s, st.trig[2], st.trig[3], acc1, acc2, p.dt, m, p.plane, False, 0, buf, row,
+                               arc_window(st, p, k))
     limit = LIMIT_NONE
     if elapsed < p.dt:
         limit = LIMIT_IMPACTS
     elif abs(s1[4]) > p.W_max or abs(s1[5]) > p.w_max:
         limit = LIMIT_SPEED
-    count = count + n_arc
+    count = st.count + buf.arc_count[row]
+    tx, ty = st.target
     dx, dy = tx - s1[0], ty - s1[1]
     d = math.sqrt(dx * dx + dy * dy)
-    r, success = step_reward(k, d_prev, d, s1[4], s1[5], ctrl, n_arc, count, XP)
+    r, success = step_reward(k, st.dist, d, s1[4], s1[5], ctrl, buf.arc_count[row], count, XP)
     trig1 = angle_trig(s1)
     o = observe(s1, trig1, tx, ty, count, p)
-    truncated = steps + 1 >= p.max_steps or limit != LIMIT_NONE
-    return s1, trig1, o, n_imp, count, d, r, bool(success), truncated, kinetic_energy(s1, p), limit, elapsed
+    truncated = st.steps + 1 >= p.max_steps or limit != LIMIT_NONE
+    new = PennyState(s1, trig1, st.target, st.arc, count, d, st.steps + 1, st.time + elapsed)
+    return new, o, r, bool(success), truncated, kinetic_energy(s1, p), limit
 
 
-def step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, p, m, k,
-              obs, rew, term, trunc, n_imp, times, ends, ke, limit):
-    """env_step over every env i not in skip (in parallel when compiled), in place: S (6, N),
-    trig (4, N), count, dist, steps and time advance; obs, rew, term, trunc, n_imp, times (N, K)
-    (NaN-padded), ends (N, K) (0-padded), ke (kinetic energy) and limit (LIMIT_* codes) receive
-    the step's results.
-    Skipped envs (they reset at this step, NEXT_STEP autoreset) keep their state and get zero
-    rewards and no flags; their obs and ke rows are left for the caller (it resets them)."""
-    for i in prange(S.shape[1]):
-        for j in range(times.shape[1]):
-            times[i, j] = np.nan
-            ends[i, j] = 0
-        if skip[i]:
-            rew[i] = 0.0
-            term[i] = False
-            trunc[i] = False
-            n_imp[i] = 0
-            limit[i] = LIMIT_NONE
-            continue
-        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-        tr = (trig[0, i], trig[1, i], trig[2, i], trig[3, i])
+def env_row(st, i):
+    """Row i of the EnvState st as a PennyState."""
+    S, tr = st.S, st.trig
+    return PennyState((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), (tr[0, i], tr[1, i], tr[2, i], tr[3, i]),
+                      (st.target[0, i], st.target[1, i]), (st.arc[0, i], st.arc[1, i]), st.count[i], st.dist[i],
+                      st.steps[i], st.time[i])
+
+
+def step_env(i, st, actions, skip, p, m, k, out, buf):
+    """env_step of env i of the EnvState st in place (st's row advances; out's row and buf's row receive
+    the step's results; the info's impact times are NaN-padded, its ends 0-padded, past the count).
+    A skipped env (it resets at this step, NEXT_STEP autoreset) keeps its state and gets a zero reward,
+    no flags and no impacts; its obs and kinetic-energy rows are left for the caller (it resets them)."""
+    clear_row(buf, i)
+    if skip[i]:
+        out.reward[i] = 0.0
+        out.terminated[i] = False
+        out.truncated[i] = False
+        out.limit[i] = LIMIT_NONE
+    else:
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
-        s1, tr1, o, n, c, d, r, te, tu, e, lim, el = env_step(s, tr, actions[i, 0], a1, target[0, i], target[1, i],
-                                                              arc[0, i], arc[1, i], count[i], dist[i], steps[i], p, m,
-                                                              k, times, ends, i)
-        write_row(obs, i, o)
+        new, o, r, te, tu, e, lim = env_step(env_row(st, i), actions[i, 0], a1, p, m, k, buf, i)
+        write_row(out.obs, i, o)
         for row in range(6):
-            S[row, i] = s1[row]
+            st.S[row, i] = new.s[row]
         for row in range(4):
-            trig[row, i] = tr1[row]
-        n_imp[i] = n
-        count[i] = c
-        dist[i] = d
-        steps[i] += 1
-        time[i] += el
-        rew[i] = r
-        term[i] = te
-        trunc[i] = tu
-        ke[i] = e
-        limit[i] = lim
+            st.trig[row, i] = new.trig[row]
+        st.count[i] = new.count
+        st.dist[i] = new.dist
+        st.steps[i] = new.steps
+        st.time[i] = new.time
+        out.reward[i] = r
+        out.terminated[i] = te
+        out.truncated[i] = tu
+        out.kinetic_energy[i] = e
+        out.limit[i] = lim
+    for j in range(buf.count[i], buf.time.shape[1]):
+        buf.time[i, j] = np.nan
+        buf.end[i, j] = 0
 
 
-def observe_rows(rows, S, trig, target, count, p, obs):
-    """trig and obs of the envs in rows (after their reset)."""
-    for i in rows:
-        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-        tr = angle_trig(s)
-        for row in range(4):
-            trig[row, i] = tr[row]
-        write_row(obs, i, observe(s, tr, target[0, i], target[1, i], count[i], p))
+def step_envs(st, actions, skip, p, m, k, out, buf):
+    for i in prange(st.S.shape[1]):
+        step_env(i, st, actions, skip, p, m, k, out, buf)
 
 
-def plane_advance(s, acc1, acc2, dt, m, stop_after=0):
-    """advance_m and advance_through_m in the open plane's compiled step: one flow, which is the whole
-    motion where there is no wall (and transition never calls them there: p.plane). It keeps the event
-    loop and the impact search out of the plane's machine code, a third of its compile time."""
-    impacts = [(0.0, 0, s)]  # typed by example, as in scalar.advance_m
-    impacts.pop()
-    rests = [(0.0, False)]
-    rests.pop()
-    return flow1(s, acc1, acc2, dt, m.R), impacts, rests, dt
+def observe_row(j, rows, st, p, obs):
+    """trig and obs of env rows[j] (after its reset)."""
+    i = rows[j]
+    s = (st.S[0, i], st.S[1, i], st.S[2, i], st.S[3, i], st.S[4, i], st.S[5, i])
+    tr = angle_trig(s)
+    for row in range(4):
+        st.trig[row, i] = tr[row]
+    write_row(obs, i, observe(s, tr, st.target[0, i], st.target[1, i], st.count[i], p))
+
+
+def observe_rows(rows, st, p, obs):
+    for j in prange(rows.shape[0]):
+        observe_row(j, rows, st, p, obs)
 
 
 # -- entry points called from Python -----------------------------------------------------------------
-# The constants travel as plain tuples, consts = pack(p, m, k), rebuilt into their NamedTuples inside:
-# numba unboxes a plain tuple several times faster than a NamedTuple, which matters for the single
-# env, whose whole step costs a few microseconds.
+# The constants travel as plain tuples, consts = pack(p, m, k), and the records as plain tuples too,
+# rebuilt into their NamedTuples inside: numba unboxes a plain tuple several times faster than a
+# NamedTuple, which matters for the single env, whose whole step costs a few microseconds.
 def pack(p, m, k):
     """(EnvParams, Model, TaskConstants) as plain tuples, for the entry points below."""
     return tuple(p), tuple(m), tuple(k)
 
 
-def env_step_packed(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps, consts, obs, times, ends):
-    """env_step with consts = pack(p, m, k) (PennyEnv's entry point): the observation goes into row 0
-    of obs (1, obs_dim), the impacts into row 0 of times and ends (1, K); returns env_step's tuple
-    without the observation."""
+def env_step_packed(st, a0, a1, consts, obs, buf):
+    """env_step with st a plain tuple of PennyState's fields, consts = pack(p, m, k) and buf a plain tuple
+    of ImpactBuffers' arrays (one row) (PennyEnv's entry point): the observation goes into row 0 of obs
+    (1, obs_dim); returns (new state as a plain tuple, reward, terminated, truncated, kinetic energy, limit)."""
     pt, mt, kt = consts
-    s1, trig1, o, n, c, d, r, te, tu, e, lim, el = env_step(s, trig, a0, a1, tx, ty, arc_c, arc_s, count, d_prev, steps,
-                                                            EnvParams(*pt), Model(*mt), TaskConstants(*kt), times, ends, 0)
+    new, o, r, te, tu, e, lim = env_step(PennyState(*st), a0, a1, EnvParams(*pt), Model(*mt), TaskConstants(*kt),
+                                         ImpactBuffers(*buf), 0)
     write_row(obs, 0, o)
-    return s1, trig1, n, c, d, r, te, tu, e, lim, el
+    return (new.s, new.trig, new.target, new.arc, new.count, new.dist, new.steps, new.time), r, te, tu, e, lim
 
 
-def step_envs_packed(S, trig, actions, skip, target, arc, count, dist, steps, time, consts,
-                     obs, rew, term, trunc, n_imp, times, ends, ke, limit):
-    """step_envs with consts = pack(p, m, k) (PennyVectorEnv's entry point)."""
+def step_envs_packed(st, actions, skip, consts, out, buf):
+    """step_envs with plain tuples: st of EnvState's arrays, consts = pack(p, m, k), out of StepResults'
+    arrays, buf of ImpactBuffers' (PennyVectorEnv's entry point)."""
     pt, mt, kt = consts
-    step_envs(S, trig, actions, skip, target, arc, count, dist, steps, time, EnvParams(*pt), Model(*mt),
-              TaskConstants(*kt), obs, rew, term, trunc, n_imp, times, ends, ke, limit)
+    step_envs(EnvState(*st), actions, skip, EnvParams(*pt), Model(*mt), TaskConstants(*kt), StepResults(*out),
+              ImpactBuffers(*buf))
 
 
-def observe_rows_packed(rows, S, trig, target, count, consts, obs):
-    """observe_rows with consts = pack(p, m, k)."""
-    observe_rows(rows, S, trig, target, count, EnvParams(*consts[0]), obs)
+def observe_rows_packed(rows, st, consts, obs):
+    """observe_rows with st a plain tuple of EnvState's arrays and consts = pack(p, m, k)."""
+    observe_rows(rows, EnvState(*st), EnvParams(*consts[0]), obs)
 
 
 def initial_observation_packed(obs, s, tx, ty, consts):
@@ -300,73 +328,82 @@ PYTHON_FUNCTIONS = {"env_step": env_step_packed, "step_envs": step_envs_packed, 
                     "initial_observation": initial_observation_packed}
 
 
-def compiled_env_functions(kind: int) -> dict:
-    """PYTHON_FUNCTIONS compiled with numba for the scenes whose Model.kind is ``kind`` (the open
-    plane: scalar.OTHER), once per process for each kind and registry state (see
-    physics/compiled.py's compiled_functions, whose physics they call); the machine code is cached
-    on disk where compiled.cacheable(kind).
+def _vector_count(args):
+    return args[1].shape[0]  # step_envs_packed's actions (N, n_act)
 
-    The functions above are compiled as copies whose globals hold the compiled physics and task
-    functions (closures over compiled functions would miss numba's on-disk cache in every new
-    process); see physics/compiled.py."""
+
+def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) -> dict:
+    """PYTHON_FUNCTIONS built for ``target`` (physics/builder.py) for the scenes whose Model.kind is
+    ``kind`` (the open plane: scalar.OTHER), once per process for each target, kind and registry state.
+    CPU: numba copies whose globals hold the compiled physics and task functions (physics/compiled.py's
+    physics_build, whose namespace they extend), cached on disk where compiled.cacheable(kind); the
+    vector step's loop parallel over envs. CUDA: device functions, and the loops step_envs and
+    observe_rows as kernels (one thread per env) taking the records (NamedTuples of device arrays)
+    and the NamedTuples of constants: entries "step_envs_kernel" and "observe_rows_kernel". fresh: build
+    anew (physics included) and keep nothing (the PTX tests compile each compute capability from scratch)."""
     from ..physics import compiled
+    from ..physics.builder import check_target
 
+    target = check_target(target)
     kind = compiled.check_kind(kind)
-    key = compiled.variant_key(kind)
-    if key in _COMPILED:
+    key = (target,) + compiled.variant_key(kind)
+    if key in _COMPILED and not fresh:
         return _COMPILED[key]
-    import numba
-
-    from ..physics import numba_math, parallel
+    if target == "python":
+        _COMPILED[key] = PYTHON_FUNCTIONS
+        return PYTHON_FUNCTIONS
     from . import functional, tasks
 
-    phys = compiled.compiled_functions(kind)  # (also picks the threading layer: physics/parallel.py)
-    own = compiled.cacheable(kind) and compiled.disk_cache_available()
+    phys = compiled.physics_build(target, kind, fresh)  # (also picks the threading layer: physics/parallel.py)
+    own = phys.cache
     modules = compiled.physics_modules() + (tasks, functional)
     if own:
         compiled.drop_stale_cache(Path(__file__).with_name("__pycache__"), modules)
+    from ..physics.builder import Builder
     # the digest of every inlined source in the copies' names: never stale, whatever the cache location
-    variant = f"{compiled.variant_name(kind)}_{compiled.source_digest(modules)}"
-    jit = numba.njit(cache=own)
+    variant = f"{compiled.variant_name(kind)}_{compiled.source_digest(modules)}" + ("_cuda" if target == "cuda" else "")
+    b = Builder(target, variant, cache=own)
+    b.namespace.update({k: v for k, v in phys.namespace.items() if k != "__builtins__"})
+    b.add(tasks)  # the task formulas' constants (REACH, PARK, IMPACTS)
+    b.add({k: v for k, v in vars(functional).items() if not isinstance(v, types.FunctionType) and k != "prange"})
+    b.namespace["XP"] = b.math
+    for name in ("run_interval", "clear_row"):
+        b.namespace[name] = phys.namespace[name]
+    b.copies((tasks.step_reward, clip_action, observe, angle_trig, kinetic_energy, arc_window, env_row))
     # inlined: a call that passes arrays increments and decrements their reference counts, atomically
-    inline = numba.njit(cache=own, inline="always")
-
-    def copy(f, compiler=jit):
-        return compiled.jit_copy(f, namespace, compiler, variant)
-
-    namespace = dict(vars(tasks))  # the task formulas' constants (REACH, PARK, IMPACTS)
-    namespace.update(vars(functional), __builtins__=builtins, XP=numba_math, prange=numba.prange)
-    for name in ("certified_free_trig", "flow1", "advance_m", "advance_through_m"):
-        namespace[name] = phys[name]
-    if kind < 0:  # the open plane (the only kind -1 that compiles): no event loop to compile
-        namespace["advance_m"] = namespace["advance_through_m"] = copy(plane_advance)
-    for f in (tasks.on_arc, tasks.step_reward, clip_action, observe, angle_trig, kinetic_energy):
-        namespace[f.__name__] = copy(f)
-    for f in (write_row, transition):
-        namespace[f.__name__] = copy(f, inline)
-    namespace["observe_rows"] = copy(observe_rows)
-    namespace["initial_observation"] = copy(initial_observation)
-    namespace["env_step"] = copy(env_step)
-    single = copy(env_step_packed)
-    # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
-    namespace["env_step"] = copy(env_step, inline)
-    namespace["step_envs"] = copy(step_envs, numba.njit(parallel=True, cache=own))
-    def serial_step_envs():  # for a child forked after OpenMP ran: the same loop without prange's threads
-        serial = dict(namespace)
-        serial["step_envs"] = compiled.jit_copy(step_envs, serial, jit, f"{variant}_serial")
-        return compiled.jit_copy(step_envs_packed, serial, jit, f"{variant}_serial")
-
-    _COMPILED[key] = {"env_step": single,
-                      # one parallel call at a time
-                      "step_envs": parallel.locked(copy(step_envs_packed), serial_step_envs),
-                      "observe_rows": copy(observe_rows_packed),
-                      "initial_observation": copy(initial_observation_packed)}
-    return _COMPILED[key]
+    b.copies((write_row,), inline=True)
+    b.copy(initial_observation)
+    if target == "cuda":
+        b.copies((env_step, step_env, observe_row))
+        fns = {"step_envs_kernel": b.loop(step_envs), "observe_rows_kernel": b.loop(observe_rows)}
+    else:
+        b.copy(env_step)
+        single = b.copy(env_step_packed)
+        # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
+        b.copy(env_step, inline=True)
+        b.copies((step_env, observe_row), inline=True)
+        fns = {"env_step": single,
+               # one parallel call at a time (parallel.locked), serially for few envs or in a forked child
+               "step_envs": b.loop(step_envs, entry=step_envs_packed, count=_vector_count)}
+        b.namespace["observe_rows"] = b.copy(observe_rows)
+        fns["observe_rows"] = b.copy(observe_rows_packed)
+        fns["initial_observation"] = b.copy(initial_observation_packed)
+    if target == "cuda":
+        fns["physics"] = phys.functions
+        fns["laws"] = phys.laws
+    if not fresh:
+        _COMPILED[key] = fns
+    return fns
 
 
 def env_functions(backend: str, kind: int) -> dict:
     """The entry points of a backend ("env_step", "step_envs", "observe_rows", "initial_observation",
     taking consts = pack(p, m, k)): "numba" (compiled for Model.kind ``kind``: it must be m.kind of
     the consts they will receive, as the compiled physics calls that table's formulas whatever m
-    says) or "python" (these functions as they are, for any kind)."""
-    return compiled_env_functions(kind) if backend == "numba" else PYTHON_FUNCTIONS
+    says), "cuda" (the kernels, see compiled_env_functions) or "python" (these functions as they are,
+    for any kind)."""
+    if backend == "numba":
+        return compiled_env_functions(kind, "cpu")
+    if backend == "cuda":
+        return compiled_env_functions(kind, "cuda")
+    return PYTHON_FUNCTIONS

@@ -10,7 +10,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from ..physics.compiled import announce_compile
-from ..physics.scalar import scalar_model
+from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys
 from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
@@ -188,21 +188,26 @@ class PennyEnv(gym.Env):
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
         self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
-        self._times = np.empty((1, IMPACTS_BUFFER))
-        self._ends = np.empty((1, IMPACTS_BUFFER), dtype=np.int64)
+        self._buffers(max(IMPACTS_BUFFER, self.max_impacts_in_info))
         if core.backend == "numba":  # load the machine code now, not in the first step
             announce_compile("single env step", "open plane" if core.table is None else type(core.table).__name__,
                              self._m.kind, self._fns["env_step"])
             obs = np.empty((1, core.obs_dim), dtype=np.float32)
             s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
             trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._consts)
-            self._fns["env_step"](s, trig, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0.0, 0, self._consts, obs, self._times,
-                                  self._ends)
+            st = (s, trig, (0.0, 0.0), (1.0, 0.0), 0, 0.0, 0, 0.0)
+            self._fns["env_step"](st, 0.0, 0.0, self._consts, obs, self._buf_args)
+
+    def _buffers(self, capacity):
+        """The step's impact buffers (scalar.ImpactBuffers, one row of ``capacity`` slots), and the plain
+        tuple of them the compiled step takes."""
+        self._buf = impact_buffers(1, capacity)
+        self._buf_args = tuple(self._buf)
 
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_renderer"] = None
-        for key in ("_core", "_fns", "_p", "_m", "_consts", "_times", "_ends"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_buf", "_buf_args"):
             state.pop(key)
         return state
 
@@ -264,22 +269,21 @@ class PennyEnv(gym.Env):
         a = _action_list(action, c.n_act)
         a1 = a[1] if c.n_act == 2 else 0.0
         obs = np.empty((1, c.obs_dim), dtype=np.float32)
-        args = (self._s, self._trig, a[0], a1, self._target[0], self._target[1], self._arc[0], self._arc[1],
-                self._count, self._d, self._steps, self._consts, obs)
-        prev = self._s
+        st = (self._s, self._trig, self._target, self._arc, self._count, self._d, self._steps, self._t)
         self._in_step = True  # cleared once the step's results are all stored (see step's docstring)
-        out = self._fns["env_step"](*args, self._times, self._ends)
-        n_imp = out[2]
-        if n_imp > self._times.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
-            self._times, self._ends = np.empty((1, n_imp)), np.empty((1, n_imp), dtype=np.int64)
-            out = self._fns["env_step"](*args, self._times, self._ends)
-        s, self._trig, n_imp, self._count, d, reward, terminated, truncated, energy, limit, elapsed = out
+        out = self._fns["env_step"](st, a[0], a1, self._consts, obs, self._buf_args)
+        n_imp = int(self._buf.count[0])
+        if n_imp > self._buf.time.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
+            self._buffers(n_imp)
+            out = self._fns["env_step"](st, a[0], a1, self._consts, obs, self._buf_args)
+        new, reward, terminated, truncated, energy, limit = out
+        s, self._trig, _, _, self._count, d, self._steps, t = new
+        t_prev = self._t
         self._s = s
         self._d = d
-        self._steps += 1
-        self._t += elapsed
+        self._t = t
         if n_imp:
-            times, ends = tuple(self._times[0, :n_imp].tolist()), tuple(self._ends[0, :n_imp].tolist())
+            times, ends = tuple(self._buf.time[0, :n_imp].tolist()), tuple(self._buf.end[0, :n_imp].tolist())
         else:
             times = ends = ()
         info = self._info(n_imp, times, ends, energy, terminated, limit)
@@ -288,8 +292,9 @@ class PennyEnv(gym.Env):
         self._in_step = False
         if self.render_mode is not None:
             self._trail.append((s[0], s[1]))
-            if n_imp:
-                self._hud["impacts"].extend(self._impacts_for_render(prev, a[0], a1, times, elapsed))
+            if n_imp:  # the step's own post-impact states (its buffer), for the renderer's flashes
+                self._hud["impacts"].extend((t_prev + ti, end, tuple(self._buf.post[0, j].tolist()))
+                                            for j, (ti, end) in enumerate(zip(times, ends)))
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
@@ -308,18 +313,6 @@ class PennyEnv(gym.Env):
         if self._core.impacts:
             info["arc_impacts"] = self._count
         return info
-
-    def _impacts_for_render(self, s, a0, a1, times, elapsed):
-        """(time since reset, end, post-impact state) of the step's impacts, for the renderer's flashes: the
-        step's period from its start state s rerun in the plain-Python event loop (rendering only)."""
-        from ..physics.scalar import advance_through_m
-
-        p = self._p
-        acc1, acc2 = (a0 * p.gain1, a1 * p.gain2) if p.n_act == 2 else \
-            ((a0 * p.gain1, 0.0) if p.steer_only else (0.0, a0 * p.gain2))
-        _, impacts, _, _ = advance_through_m(s, acc1, acc2, elapsed, self._m)
-        t0 = self._t - elapsed
-        return [(t0 + t, end, post) for t, end, post in impacts[:len(times)]]
 
     # -- state access (analysis, tests) -----------------------------------------------------------
     @property

@@ -8,8 +8,8 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..physics.compiled import announce_compile
-from ..physics.scalar import scalar_model
+from ..physics.compiled import announce_compile, compiles
+from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
 from .functional import env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
@@ -72,6 +72,14 @@ class PennyVectorEnv(VectorEnv):
                           episode (1 "speed", 2 "impacts"; PennyEnv's table)
     ====================  =========================================================================
 
+    **GPU** (``backend="cuda"``, ``device`` a CUDA device index, ``outputs`` "torch" or "numpy"): the
+    same step functions built for CUDA (physics/builder.py), one GPU thread per env, the state kept on
+    the device (envs/cuda_step.py). Observations, rewards, flags and the info's arrays come out as torch
+    tensors on the device, zero-copy (outputs="torch", the default with backend="cuda"), or as numpy
+    arrays (outputs="numpy"); actions may be device tensors (they stay there) or numpy. ``backend="auto"``
+    takes CUDA where numba-cuda finds a GPU, with numpy outputs unless outputs="torch" is asked (so code
+    written for numpy keeps working). SAME_STEP's ``final_obs`` rows are numpy. docs/gpu.md.
+
     Interrupted steps: a step interrupted by an exception (KeyboardInterrupt) may leave the
     envs' bookkeeping half done (stepped but not marked for autoreset); the next step() then
     raises ResetNeeded until a reset() of every env.
@@ -87,7 +95,7 @@ class PennyVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scene="ellipse", task="reach", max_episode_steps=None,
                  autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto",
-                 max_impacts_in_info: int = MAX_IMPACTS_IN_INFO, **overrides):
+                 max_impacts_in_info: int = MAX_IMPACTS_IN_INFO, device=None, outputs=None, **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be a positive integer, got {type(num_envs).__name__}")
         if num_envs < 1:
@@ -106,7 +114,15 @@ class PennyVectorEnv(VectorEnv):
         if render_mode is not None and render_mode != "rgb_array":
             raise ValueError(f"PennyVectorEnv render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.num_envs = int(num_envs)
+        if backend not in ("auto", "numba", "python", "cuda"):
+            raise ValueError(f"backend must be 'auto', 'numba', 'python' or 'cuda', got {backend!r}")
+        if outputs not in (None, "numpy", "torch"):
+            raise ValueError(f"outputs must be None, 'numpy' or 'torch', got {outputs!r}")
+        if backend not in ("auto", "cuda") and (device is not None or outputs == "torch"):
+            raise ValueError(f"device and outputs='torch' need backend='cuda' (or 'auto' on a GPU), got backend={backend!r}")
         self.backend = backend
+        self.device = device
+        self.outputs = outputs
         self.render_mode = render_mode
         self.autoreset_mode = autoreset_mode
         self.max_impacts_in_info = int(max_impacts_in_info)
@@ -131,24 +147,61 @@ class PennyVectorEnv(VectorEnv):
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        for key in ("_core", "_fns", "_p", "_m", "_consts"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_gpu"):
             state.pop(key)
+        if self._gpu is not None and self._S is not None:  # the device's state travels as host arrays
+            for name, attr in (("S", "_S"), ("trig", "_trig"), ("target", "_target"), ("arc", "_arc"), ("count", "_count"),
+                               ("dist", "_d"), ("steps", "_steps"), ("time", "_t")):
+                state[attr] = self._gpu.host(name)
         state["_renderers"] = None
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
         self._make_core()
+        if self._gpu is not None and self._S is not None:
+            self._gpu.upload(self._S, self._target, self._arc, self._count, self._d, self._steps, self._t)
+            self._gpu.observe(np.arange(self.num_envs), self._gpu.cuda.device_array((self.num_envs, self._core.obs_dim),
+                                                                                   np.float32))  # (the trig rows)
 
     def _make_core(self):
-        core = self._core = Core(self.scene, self.task, backend=self.backend)
+        on_gpu = self._on_gpu()
+        core = self._core = Core(self.scene, self.task, backend="python" if on_gpu else self.backend)
+        if on_gpu and not compiles(core.table):
+            if self.backend == "cuda" or self.device is not None or self.outputs == "torch":
+                raise ValueError(f"backend='cuda': scene.table {type(core.table).__name__} has no compiled formulas "
+                                 "(registered tables with formulas and the open plane run on the GPU)")
+            on_gpu = False
+            core = self._core = Core(self.scene, self.task, backend=self.backend)
         self._p = env_params(core)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
         self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
-        if core.backend == "numba":
+        self._gpu = None
+        if on_gpu:
+            from .cuda_step import CudaStep
+            outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
+            self._gpu = CudaStep(self, self._m.kind, self.device, outputs)
+        elif core.backend == "numba":
             self._warm_up()
         return core
+
+    def _on_gpu(self) -> bool:
+        """backend "cuda" (numba-cuda and a GPU or its simulator, else ValueError); "auto" with a device or
+        torch outputs asked likewise, else where numba-cuda finds a real GPU."""
+        import importlib.util
+
+        from ..physics.builder import cuda_available
+        if self.backend == "cuda" or (self.backend == "auto" and (self.device is not None or self.outputs == "torch")):
+            if importlib.util.find_spec("numba_cuda") is None:
+                raise ValueError("backend='cuda' needs numba-cuda: pip install 'penny-env[cuda]'")
+            if not cuda_available():
+                raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
+            return True
+        if self.backend != "auto" or importlib.util.find_spec("numba_cuda") is None:
+            return False
+        import numba
+        return not numba.config.ENABLE_CUDASIM and cuda_available()
 
     def _warm_up(self):
         """Load the machine code (or compile it) now rather than in the first step."""
@@ -162,13 +215,11 @@ class PennyVectorEnv(VectorEnv):
             trig = np.zeros((4, n))
             obs = np.empty((n, c.obs_dim), dtype=np.float32)
             ints = lambda: np.zeros(n, dtype=np.int64)  # noqa: E731
-            self._fns["observe_rows"](np.zeros(1, dtype=np.int64), S[:, :1], trig[:, :1], np.zeros((2, 1)), ints()[:1],
-                                      self._consts, obs[:1])
-            self._fns["step_envs"](S, trig, np.zeros((n, 2)), np.zeros(n, dtype=bool), np.zeros((2, n)),
-                                   np.zeros((2, n)), ints(), np.zeros(n), ints(), np.zeros(n), self._consts, obs,
-                                   np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), ints(),
-                                   np.zeros((n, 1)), np.zeros((n, 1), dtype=np.int8), np.zeros(n),
-                                   np.zeros(n, dtype=np.int8))
+            st = (S, trig, np.zeros((2, n)), np.zeros((2, n)), ints(), np.zeros(n), ints(), np.zeros(n))
+            self._fns["observe_rows"](np.zeros(1, dtype=np.int64), st, self._consts, obs[:1])
+            out = (obs, np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n), np.zeros(n, dtype=np.int8))
+            self._fns["step_envs"](st, np.zeros((n, 2)), np.zeros(n, dtype=bool), self._consts, out,
+                                   tuple(impact_buffers(n, 1)))
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -227,15 +278,33 @@ class PennyVectorEnv(VectorEnv):
             self._trig = np.zeros((4, n))  # cos/sin of theta and phi of self._S (the certificate uses them)
             self._d = np.zeros(n)
             self._trails = [[] for _ in range(n)] if self.render_mode else None
-        self._reset_envs(mask, states, targets)
+        rows = self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
         self._in_step = False
-        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # every row: the envs outside a reset_mask keep their state
-        self._fns["observe_rows"](np.arange(n), self._S, self._trig, self._target, self._count, self._consts, obs)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
+        if self._gpu is not None:
+            return self._reset_gpu(rows, K)
+        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # every row: the envs outside a reset_mask keep their state
+        self._fns["observe_rows"](np.arange(n), self._state(), self._consts, obs)
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
                           kinetic_energy(self._S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8))
         return obs, info
+
+    def _reset_gpu(self, rows, K):
+        """reset() on the GPU: the rows drawn on the host go to the device, every row's observation is
+        computed there; outputs as the step's (torch on the device or numpy)."""
+        from numba import cuda
+        g, n = self._gpu, self.num_envs
+        g.upload_rows(rows, self._S[:, rows], self._target[:, rows], self._arc[:, rows], self._d[rows])
+        obs = cuda.device_array((n, self._core.obs_dim), np.float32)
+        g.observe(np.arange(n), obs)
+        S = g.host("S")
+        out = g.out
+        info = self._info(out(cuda.to_device(np.zeros(n, dtype=np.int64))), out(cuda.to_device(np.full((n, K), np.nan))),
+                          out(cuda.to_device(np.zeros((n, K), dtype=np.int8))),
+                          out(cuda.to_device(kinetic_energy(S, self._p))), out(cuda.to_device(np.zeros(n, dtype=bool))),
+                          out(cuda.to_device(np.zeros(n, dtype=np.int8))))
+        return out(obs), info
 
     def _reset_envs(self, mask, states=None, targets=None):
         """Draw the next episode of the envs in mask (their trig and obs: observe_rows); returns their indices."""
@@ -266,32 +335,31 @@ class PennyVectorEnv(VectorEnv):
         if self._in_step:
             raise ResetNeeded("PennyVectorEnv.step(): the previous step was interrupted (an exception such as "
                               "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
+        if self._gpu is not None:
+            return self._step_gpu(actions)
         n = self.num_envs
         c = self._core
         a = check_actions(actions, (n, c.n_act), "actions")  # the step clips, as PennyEnv does
         next_step = self.autoreset_mode == AutoresetMode.NEXT_STEP
         skip = self._autoreset if next_step else np.zeros(n, dtype=bool)
         K = self.max_impacts_in_info
-        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # a new array each step: the caller may keep it
+        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # new arrays each step: the caller may keep them
         rew = np.empty(n)
         term = np.empty(n, dtype=bool)
         trunc = np.empty(n, dtype=bool)
-        n_imp = np.empty(n, dtype=np.int64)
-        times = np.empty((n, K))
-        ends = np.empty((n, K), dtype=np.int8)
         energy = np.empty(n)
         limit = np.empty(n, dtype=np.int8)
+        buf = impact_buffers(n, K, empty=True)  # the info's impact_times / impact_ends are its slots
         # from here to the autoreset flags the step's bookkeeping must run whole (class docstring)
         self._in_step = True
-        self._fns["step_envs"](self._S, self._trig, a, skip, self._target, self._arc, self._count, self._d,
-                               self._steps, self._t, self._consts, obs, rew, term, trunc, n_imp,
-                               times, ends, energy, limit)
+        self._fns["step_envs"](self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), tuple(buf))
+        n_imp, times, ends = buf.count, buf.time, buf.end
         self._extend_trails()
         done = term | trunc
         if next_step and skip.any():  # the envs whose episode ended at the previous step reset now
             self._episodes[skip] += np.uint64(1)
             rows = self._reset_envs(skip)
-            self._fns["observe_rows"](rows, self._S, self._trig, self._target, self._count, self._consts, obs)
+            self._fns["observe_rows"](rows, self._state(), self._consts, obs)
             energy[rows] = kinetic_energy(self._S[:, rows], self._p)
         info = self._info(n_imp, times, ends, energy, term, limit)
         if next_step:
@@ -300,6 +368,57 @@ class PennyVectorEnv(VectorEnv):
             self._end_episodes_same_step(info, obs, done, term)
         self._in_step = False
         return obs, rew, term, trunc, info
+
+    def _step_gpu(self, actions):
+        """step() on the GPU (envs/cuda_step.py): the kernel steps every env; the envs whose episode ended
+        reset on the host (their rows copied to the device), as the CPU step does, in the same order."""
+        g, n, c = self._gpu, self.num_envs, self._core
+        next_step = self.autoreset_mode == AutoresetMode.NEXT_STEP
+        skip = self._autoreset if next_step else np.zeros(n, dtype=bool)
+        K = self.max_impacts_in_info
+        a = g.actions(actions, (n, c.n_act))  # checked before the step starts (nothing changes on bad input)
+        self._in_step = True
+        res, buf = g.step(a, skip, c.obs_dim, K)
+        reset_rows = np.zeros(0, dtype=np.int64)
+        if next_step and skip.any():
+            self._episodes[skip] += np.uint64(1)
+            reset_rows = self._reset_envs(skip)
+            g.upload_rows(reset_rows, self._S[:, reset_rows], self._target[:, reset_rows], self._arc[:, reset_rows],
+                          self._d[reset_rows])
+            g.observe(reset_rows, res.obs)
+        term, trunc = res.terminated.copy_to_host(), res.truncated.copy_to_host()
+        done = term | trunc
+        final = None
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            rows = np.flatnonzero(done)
+            final = (rows, res.obs.copy_to_host()[rows])
+            self._episodes[done] += np.uint64(1)
+            reset_rows = self._reset_envs(done)
+            g.upload_rows(reset_rows, self._S[:, reset_rows], self._target[:, reset_rows], self._arc[:, reset_rows],
+                          self._d[reset_rows])
+            g.observe(reset_rows, res.obs)
+        if self._trails is not None:
+            self._S = g.host("S")
+            self._extend_trails()
+        out = g.out
+        energy = out(res.kinetic_energy)
+        if reset_rows.size:  # the reset envs' energy (the kernel left their rows)
+            energy[reset_rows] = energy.new_tensor(kinetic_energy(self._S[:, reset_rows], self._p)) \
+                if hasattr(energy, "new_tensor") else kinetic_energy(self._S[:, reset_rows], self._p)
+        term_out = out(res.terminated)
+        info = self._info(out(buf.count), out(buf.time), out(buf.end), energy, term_out, out(res.limit))
+        if next_step:
+            self._autoreset = done
+        elif final is not None:
+            rows, last = final
+            final_obs, final_info = np.empty(n, dtype=object), np.empty(n, dtype=object)
+            for j, i in enumerate(rows):
+                final_obs[i] = last[j]
+                final_info[i] = {"is_success": bool(term[i])}
+            info["final_obs"], info["_final_obs"] = final_obs, done.copy()
+            info["final_info"], info["_final_info"] = final_info, done.copy()
+        self._in_step = False
+        return out(res.obs), out(res.reward), term_out, out(res.truncated), info
 
     def _end_episodes_same_step(self, info, obs, done, terminated):
         """SAME_STEP autoreset: the last obs and info of the envs whose episode ended go to
@@ -314,8 +433,11 @@ class PennyVectorEnv(VectorEnv):
         info["final_obs"], info["_final_obs"] = final_obs, done.copy()
         info["final_info"], info["_final_info"] = final_info, done.copy()
         self._episodes[done] += np.uint64(1)
-        self._fns["observe_rows"](self._reset_envs(done), self._S, self._trig, self._target, self._count, self._consts,
-                                  obs)
+        self._fns["observe_rows"](self._reset_envs(done), self._state(), self._consts, obs)
+
+    def _state(self):
+        """The envs' state arrays as the plain tuple of functional.EnvState's fields the step takes."""
+        return (self._S, self._trig, self._target, self._arc, self._count, self._d, self._steps, self._t)
 
     def _extend_trails(self):
         if self._trails is not None:
@@ -325,28 +447,38 @@ class PennyVectorEnv(VectorEnv):
 
     def _info(self, counts, times, ends, energy, success, limit):
         t = self._true
+        if self._gpu is not None:  # the running values live on the device
+            g = self._gpu
+            time, dist, count = (g.out(getattr(g.st, name)).clone() if g.outputs == "torch" else g.host(name)
+                                 for name in ("time", "dist", "count"))
+        else:
+            time, dist, count = self._t.copy(), self._d.copy(), self._count.copy()
         info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
                 "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": energy,
-                "_kinetic_energy": t.copy(), "time": self._t.copy(), "_time": t.copy(), "distance": self._d.copy(),
-                "_distance": t.copy(), "is_success": success.copy(), "_is_success": t.copy(),
-                "limit": limit, "_limit": t.copy()}
+                "_kinetic_energy": t.copy(), "time": time, "_time": t.copy(), "distance": dist,
+                "_distance": t.copy(), "is_success": success.copy() if hasattr(success, "copy") else success.clone(),
+                "_is_success": t.copy(), "limit": limit, "_limit": t.copy()}
         if self._core.impacts:
-            info["arc_impacts"] = self._count.copy()
+            info["arc_impacts"] = count
             info["_arc_impacts"] = t.copy()
         return info
 
     # -- state access ---------------------------------------------------------------------
     @property
     def states(self) -> np.ndarray:
-        """(num_envs, 6) copy of the pennies' states (x, y, theta, phi, theta_dot, phi_dot)."""
+        """(num_envs, 6) copy of the pennies' states (x, y, theta, phi, theta_dot, phi_dot), numpy."""
         if self._S is None:
             raise ResetNeeded("call reset() first")
+        if self._gpu is not None:
+            return self._gpu.host("S").T.copy()
         return self._S.T.copy()
 
     @property
     def targets(self) -> np.ndarray:
         if self._S is None:
             raise ResetNeeded("call reset() first")
+        if self._gpu is not None:
+            return self._gpu.host("target").T.copy()
         return self._target.T.copy()
 
     def render(self):

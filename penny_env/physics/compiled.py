@@ -1,20 +1,19 @@
-"""Compiled batches (numba): physics/scalar.py's own functions, compiled, run over the pennies of a
-batch in parallel.
+"""Compiled batches: physics/scalar.py's own functions, built by physics/builder.py for a target ("cpu":
+numba, parallel over the pennies of a batch; "cuda": one GPU thread per penny; "python": as they are).
 
-Nothing here restates the physics. :func:`compiled_functions` takes the functions of kernels.py,
-flows.py and scalar.py as they are and compiles copies of them with numba, in which the math
-namespace ``SCALAR`` is physics/numba_math.py (the same ``math`` functions, for numba). The only
-new code is the loop over pennies (``_advance_batch``, ``_flow_batch``, ``_first_impact_batch``), the
-unpacking of their impacts into arrays, and the tables' and laws' formulas put in place of the
-plain loop's dispatch. The physics is compiled once per table kind (:func:`compiled_functions`):
+Nothing here restates the physics. :func:`physics_build` takes the functions of kernels.py, flows.py and
+scalar.py as they are and has the builder compile copies of them, in which the math namespace ``SCALAR`` is
+the target's (physics/numba_math.py on the CPU). The only new code is the per-penny work of a batch
+(:func:`advance_penny`, :func:`first_impact_penny`: one call of scalar.run_interval or of the first-impact
+search) and its two-line loops (:func:`advance_batch`, :func:`first_impact_batch`), and the tables' and
+laws' formulas put in place of the plain loop's dispatch. The physics is compiled once per table kind:
 ``wall_terms`` and ``wall_hess`` call that table's formulas directly, so the impact search pays no
 branch over the registered shapes and keeps its helpers inlined (with a dispatch over the four
 built-in shapes, the vector env's step was about 3 % slower: PennyImpacts-Stadium-v0, N = 4096). The law is chosen at run time (:func:`law_dispatch_source`,
 generated from laws.COMPILED_LAWS and compiled without the disk cache, its machine code cached
 within its callers'): laws only act at impacts. Every cached copy's name carries a hash of the sources
 it inlines (:func:`source_digest`), so no cache location can serve stale machine code. A penny therefore takes the same operations as
-in the plain-Python loop (physics/pennies.py's ``backend="python"``); tests/test_compiled.py checks
-that the two agree bitwise.
+in the plain-Python loop (the "python" target); tests/test_compiled.py checks that they agree bitwise.
 
 Every registered table (Ellipse, Circle, Stadium, RoundedRectangle, and any table registered with
 formulas, see docs/extending.md) compiles; other tables (ConvexTable, protocol objects) run the
@@ -24,8 +23,6 @@ code on disk (``cache=True``).
 """
 from __future__ import annotations
 
-import builtins
-import functools
 import importlib
 import importlib.util
 import math
@@ -33,6 +30,8 @@ import types
 from pathlib import Path
 
 import numpy as np
+
+from .scalar import NO_ARC, first_impact_resumed, flow1, run_interval  # noqa: F401  (the plain loops' globals)
 
 # capacity of the per-penny impact buffer of one batch call; a penny with more impacts in one
 # interval (accumulations) is rerun alone to collect them all
@@ -223,15 +222,16 @@ def physics_modules() -> tuple:
     return (kernels, flows, scalar, numba_math, importlib.import_module(__name__)) + tables
 
 
-def jit_copy(f, namespace, jit, variant=""):
+def jit_copy(f, namespace, jit, variant="", math=None):
     """``jit`` of a copy of function f whose globals are ``namespace`` (where the math namespaces
-    are physics/numba_math.py); default arguments that are modules (``xp``) become numba_math too.
+    are physics/numba_math.py, or ``math``); default arguments that are modules (``xp``) become that
+    namespace too.
     ``variant`` (a table kind's name, see :func:`variant_name`) goes into the copy's qualified name:
     numba's on-disk cache files are named after it, and copies compiled against different tables
     must not share them."""
-    from . import numba_math
-
-    defaults = tuple(numba_math if isinstance(d, types.ModuleType) else d for d in (f.__defaults__ or ()))
+    if math is None:
+        from . import numba_math as math
+    defaults = tuple(math if isinstance(d, types.ModuleType) else d for d in (f.__defaults__ or ()))
     copy = types.FunctionType(f.__code__, namespace, f.__name__, defaults, f.__closure__)
     copy.__module__ = f.__module__
     copy.__qualname__ = f"{f.__qualname__}__{variant}" if variant else f.__qualname__
@@ -277,86 +277,134 @@ def cacheable(kind: int) -> bool:
     return all(f.__module__.startswith("penny_env.") for f in fs + COMPILED_LAWS)
 
 
-def compiled_functions(kind: int) -> dict:
-    """name -> compiled function, for kernels.py, flows.phase_sweep and scalar.py, specialised to
-    one table kind: ``kind`` is the Model.kind of the pennies it will run (scalar.OTHER, -1: the open
-    plane; else an index into tables.COMPILED_FORMULAS). ``wall_terms`` and ``wall_hess`` call that
-    table's formulas; a Model of another kind must not be passed to these functions. The law is
-    dispatched at run time over laws.COMPILED_LAWS.
+def compiled_functions(kind: int, target: str = "cpu") -> dict:
+    """name -> function of the physics for ``target`` ("cpu": numba; "cuda": numba-cuda device functions
+    and kernels; "python": the plain functions), specialised to one table kind: ``kind`` is the
+    Model.kind of the pennies it will run (scalar.OTHER, -1: the open plane; else an index into
+    tables.COMPILED_FORMULAS). ``wall_terms`` and ``wall_hess`` call that table's formulas; a Model of
+    another kind must not be passed to these functions. The law is dispatched at run time over
+    laws.COMPILED_LAWS. The loops over pennies (advance_batch, first_impact_batch) are compiled by
+    physics/builder.py: parallel on the CPU, one thread per penny on CUDA.
 
-    Compiled once per process for each (kind, its formulas, the registered laws). With penny_env's own
-    formulas and laws the machine code is cached on disk; a user's registered formulas compile in each
-    process (cache=False, see :func:`cacheable`)."""
-    try:
-        import numba
-    except ImportError:
-        raise ImportError('the compiled backend needs numba: pip install numba') from None
-    from . import flows, kernels, numba_math, scalar
-    from .laws import COMPILED_LAWS
-    from .tables import COMPILED_FORMULAS
+    Built once per process for each (target, kind, its formulas, the registered laws). With penny_env's
+    own formulas and laws the CPU machine code is cached on disk; a user's registered formulas compile
+    in each process (cache=False, see :func:`cacheable`)."""
+    from .builder import check_target
+    target = check_target(target)
     kind = check_kind(kind)
-    key = variant_key(kind)
+    key = (target,) + variant_key(kind)
     if key in _COMPILED:
         return _COMPILED[key]
-    from . import parallel as parallel_setup
-    parallel_setup.configure()  # before any parallel loop runs: the threading layer is chosen once per process
-    own = cacheable(kind) and disk_cache_available()
+    if target == "python":
+        from . import scalar
+        fns = {k: v for k, v in vars(scalar).items() if isinstance(v, types.FunctionType)}
+        fns.update(advance_batch=advance_batch, first_impact_batch=first_impact_batch)
+        _COMPILED[key] = fns
+        return fns
+    _COMPILED[key] = fns = physics_build(target, kind).functions
+    return fns
+
+
+_BUILDS: dict = {}  # (target,) + variant_key(kind) -> Builder
+
+
+def physics_build(target: str, kind: int, fresh: bool = False):
+    """The Builder (physics/builder.py) holding the physics' copies for ``target`` and table kind ``kind``;
+    its ``functions`` attribute maps the names callers use to the compiled functions. The env step's build
+    (envs/functional.py) starts from a copy of its namespace. Built once per process and key; fresh: a new
+    build, not kept (the PTX tests compile each compute capability from scratch)."""
+    key = (target,) + variant_key(check_kind(kind))
+    if not fresh and key in _BUILDS:
+        return _BUILDS[key]
+    b = _physics_build(target, kind)
+    if not fresh:
+        _BUILDS[key] = b
+    return b
+
+
+def _physics_build(target, kind):
+    if target == "cpu":
+        try:
+            import numba
+        except ImportError:
+            raise ImportError('the compiled backend needs numba: pip install numba') from None
+    from . import flows, kernels, scalar
+    from .builder import Builder
+    from .laws import COMPILED_LAWS
+    from .tables import COMPILED_FORMULAS
+    if target == "cpu":
+        from . import parallel as parallel_setup
+        parallel_setup.configure()  # before any parallel loop runs: the threading layer is chosen once per process
+    own = target == "cpu" and cacheable(kind) and disk_cache_available()
     modules = physics_modules()
-    variant = f"{variant_name(kind)}_{source_digest(modules)}"
+    variant = f"{variant_name(kind)}_{source_digest(modules)}" + ("_cuda" if target == "cuda" else "")
     if own:
         cache = Path(__file__).with_name("__pycache__")
         drop_stale_cache(cache, modules)
         drop_stale_cache(Path(__file__).parent / "tables" / "__pycache__", modules)  # the formulas' copies
-
-    jit = numba.njit(cache=own)
-
-    def copy(f, compiler=jit):
-        return jit_copy(f, namespace, compiler, variant)
-
-    namespace = {"__builtins__": builtins}
+    b = Builder(target, variant, cache=own)
     for module in (kernels, flows, scalar):
-        namespace.update({k: v for k, v in vars(module).items() if not k.startswith("__")})
-    namespace["SCALAR"] = namespace["ARRAY"] = numba_math
+        b.add(module)
     # the quadrature rules as 2-D arrays: the same numbers, which compiled code indexes faster than
     # a tuple of tuples
     for name in ("RULE_NODES", "RULE_WEIGHTS"):
-        namespace[name] = np.array(getattr(flows, name))
+        b.namespace[name] = np.array(getattr(flows, name))
     sources = [f for module in (kernels, scalar) for f in vars(module).values()
                if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
     sources.append(flows.phase_sweep)
-    for f in sources:
-        namespace[f.__name__] = copy(f)
+    b.copies(sources)
 
-    def formula(f):  # penny_env's run in the physics namespace (numba_math); a user's in its own globals
-        return copy(f) if f.__module__.startswith("penny_env.") else jit(f)
+    def formula(f):  # penny_env's run in the physics namespace; a user's in its own globals
+        if f.__module__.startswith("penny_env."):
+            return b.copy(f)
+        return b._jit(f)
 
     # the table's formulas in place of scalar.wall_terms / wall_hess (which index a Python list),
     # and the laws' dispatch in place of scalar.law_terms
     if kind >= 0:
-        namespace["table_terms"], namespace["table_hess"] = (formula(f) for f in COMPILED_FORMULAS[kind])
-        namespace["wall_terms"], namespace["wall_hess"] = copy(_table_wall_terms), copy(_table_wall_hess)
-    else:
-        namespace["wall_terms"] = namespace["wall_hess"] = copy(_no_wall)
+        b.namespace["table_terms"], b.namespace["table_hess"] = (formula(f) for f in COMPILED_FORMULAS[kind])
+        b.namespace["wall_terms"], b.namespace["wall_hess"] = b.copy(_table_wall_terms), b.copy(_table_wall_hess)
+    else:  # the open plane never evaluates a wall, nor runs the event loop (about halves its build)
+        b.namespace["wall_terms"] = b.namespace["wall_hess"] = b.copy(_no_wall)
+        b.namespace["advance_into"] = b.copy(plane_advance_into)
+        b.namespace["advance_through_into"] = b.copy(plane_advance_through_into)
     for j, update in enumerate(COMPILED_LAWS):
-        namespace[f"law_{j}"] = formula(update)
-    namespace["law_terms"] = copy(_law_dispatch(len(COMPILED_LAWS)), numba.njit(cache=False))
-    fns = {f.__name__: namespace[f.__name__] for f in sources}
-    # the loops over pennies, compiled as copies too: module-level functions whose callees are
-    # globals of the namespace (closures over dispatchers would miss numba's cache every process)
-    namespace["prange"] = numba.prange
-    namespace["_angle_trig"] = copy(_angle_trig)
-    parallel = numba.njit(parallel=True, cache=own)
-    for f in (_advance_batch, _flow_batch, _first_impact_batch):  # called under parallel.PARALLEL_LOCK
-        # serially in a child forked after OpenMP ran (its own name: never the parallel copy's cache files)
-        serial = functools.partial(jit_copy, f, namespace, jit, f"{variant}_serial")
-        fns[f.__name__] = parallel_setup.locked(copy(f, parallel), serial)
-    _COMPILED[key] = fns
-    return fns
+        b.namespace[f"law_{j}"] = formula(update)
+    b.laws = [b.namespace[f"law_{j}"] for j in range(len(COMPILED_LAWS))]  # (their compiled copies, for tests)
+    dispatch = _law_dispatch(len(COMPILED_LAWS))
+    if target == "cpu":  # in memory, so never disk-cached itself (see _law_dispatch)
+        import numba
+        b.copy(dispatch, jit=numba.njit(cache=False))
+    else:
+        b.copy(dispatch)
+    functions = {f.__name__: b.namespace[f.__name__] for f in sources}
+    functions.update(advance_into=b.namespace["advance_into"], advance_through_into=b.namespace["advance_through_into"])
+    # the per-penny bodies and their loops (parallel over pennies on the CPU, a kernel on CUDA)
+    b.copies((angle_trig_into, advance_penny, first_impact_penny), inline=True)
+    for loop in (advance_batch, first_impact_batch):  # called under parallel.PARALLEL_LOCK on the CPU
+        functions[loop.__name__] = b.loop(loop)
+    b.functions = functions
+    return b
 
 
-# -- the loops over the pennies of a batch (compiled by compiled_functions, never run as Python) --
-def _angle_trig(s, trig, i):
-    """cos theta, sin theta, cos phi, sin phi of state s into column i of trig (4, N)."""
+def plane_advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
+    """scalar.advance_into in the open plane's builds: one flow, the whole motion where there is no wall
+    (and run_interval never calls it there). It keeps the event loop out of the plane's machine code."""
+    return flow1(s, acc1, acc2, dt, m.R), dt  # noqa: F821  (in the compiled copy's namespace)
+
+
+def plane_advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc):
+    """scalar.advance_through_into in the open plane's builds (see :func:`plane_advance_into`)."""
+    return flow1(s, acc1, acc2, dt, m.R), dt  # noqa: F821
+
+
+# -- the per-penny work of a batch and its loops (physics/builder.py compiles them for each target) -----
+prange = range  # numba.prange in the CPU copies; the CUDA kernels run one penny per thread
+
+
+def angle_trig_into(s, trig, i):
+    """cos theta, sin theta, cos phi, sin phi of state s into column i of trig (4, N) (nothing when
+    trig has no columns)."""
     if trig.shape[1] > i:
         trig[0, i] = math.cos(s[2])
         trig[1, i] = math.sin(s[2])
@@ -364,66 +412,66 @@ def _angle_trig(s, trig, i):
         trig[3, i] = math.sin(s[3])
 
 
-def _advance_batch(S, acc1, acc2, dt, m, out, trig, counts, times, ends, posts):
-    cap = times.shape[1]
-    for i in prange(S.shape[1]):  # noqa: F821  (numba.prange, in the compiled copy's namespace)
-        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-        a1, a2 = acc1[i], acc2[i]
-        k = 0
-        if certified_free1(s, a1, a2, dt, m):  # noqa: F821
-            s1 = flow1(s, a1, a2, dt, m.R)  # noqa: F821
-        else:
-            s1, impacts, rests, _ = advance_through_m(s, a1, a2, dt, m)  # noqa: F821
-            k = len(impacts)
-            for j in range(min(k, cap)):
-                times[i, j] = impacts[j][0]
-                ends[i, j] = impacts[j][1]
-                post = impacts[j][2]
-                for r in range(6):
-                    posts[i, j, r] = post[r]
-        counts[i] = k
-        for r in range(6):
-            out[r, i] = s1[r]
-        _angle_trig(s1, trig, i)
+def advance_penny(i, S, acc1, acc2, dt, m, plane, stop_after, out, trig, elapsed, buf):
+    """Penny i of the batch over its interval dt[i] (scalar.run_interval, resumed after the event cap),
+    stopping after stop_after impacts (0: none): new state into column i of out (and its angles' cos
+    and sin into trig), the time run into elapsed[i], the impacts into row i of buf."""
+    s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+    s1, el = run_interval(s, math.cos(s[3]), math.sin(s[3]), acc1[i], acc2[i], dt[i], m, plane, True,  # noqa: F821
+                          stop_after, buf, i, NO_ARC)  # noqa: F821
+    for r in range(6):
+        out[r, i] = s1[r]
+    elapsed[i] = el
+    angle_trig_into(s1, trig, i)
 
 
-def _first_impact_batch(S, acc1, acc2, horizon, m, rounds, t_out, end_out):
-    for i in prange(S.shape[1]):  # noqa: F821
-        s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
-        t_out[i], end_out[i] = first_impact_resumed(s, acc1[i], acc2[i], horizon[i], m, rounds)  # noqa: F821
+def advance_batch(S, acc1, acc2, dt, m, plane, stop_after, out, trig, elapsed, buf):
+    for i in prange(S.shape[1]):
+        advance_penny(i, S, acc1, acc2, dt, m, plane, stop_after, out, trig, elapsed, buf)
 
 
-def _flow_batch(S, acc1, acc2, dt, R, out, trig):
-    for i in prange(S.shape[1]):  # noqa: F821
-        s1 = flow1((S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i]), acc1[i], acc2[i], dt, R)  # noqa: F821
-        for r in range(6):
-            out[r, i] = s1[r]
-        _angle_trig(s1, trig, i)
+def first_impact_penny(i, S, acc1, acc2, horizon, m, rounds, t_out, end_out):
+    """(t_hit, end) of scalar.first_impact_resumed for penny i into t_out[i], end_out[i]."""
+    s = (S[0, i], S[1, i], S[2, i], S[3, i], S[4, i], S[5, i])
+    t_out[i], end_out[i] = first_impact_resumed(s, acc1[i], acc2[i], horizon[i], m, rounds)  # noqa: F821
+
+
+def first_impact_batch(S, acc1, acc2, horizon, m, rounds, t_out, end_out):
+    for i in prange(S.shape[1]):
+        first_impact_penny(i, S, acc1, acc2, horizon, m, rounds, t_out, end_out)
 
 
 class CompiledBatch:
-    """The per-penny event loop over one control interval for (6, N) batches, compiled (see the
-    module docstring): :meth:`states_and_impacts`.
+    """The per-penny event loop over one interval for (6, N) batches, on one target (physics/builder.py):
+    "cpu" (numba, parallel over pennies, the default), "cuda" (one GPU thread per penny) or "python" (the
+    plain functions: the readable reference). :meth:`states_and_impacts`, :meth:`advance`,
+    :meth:`first_impacts`.
 
-    ``CompiledBatch(params, table, law, settings)``; table None is the open plane. Raises ImportError
-    without numba and ValueError for a table that does not compile (see :func:`compiles`)."""
+    ``CompiledBatch(params, table, law, settings, target="cpu")``; table None is the open plane. Raises
+    ImportError without numba and ValueError for a table that does not compile (see :func:`compiles`;
+    the "python" target runs any table)."""
 
-    def __init__(self, params, table, law, settings):
+    CAPACITY = IMPACT_CAPACITY
+
+    def __init__(self, params, table, law, settings, target="cpu"):
+        from .builder import check_target
         from .scalar import scalar_model
 
-        if not compiles(table):
+        self.target = check_target(target)
+        if target != "python" and not compiles(table):
             raise ValueError(f"table: only registered tables with compiled formulas compile, got {type(table).__name__}")
         self.model = scalar_model(params, table, law, settings)
-        self._fns = compiled_functions(self.model.kind)
+        self._fns = compiled_functions(self.model.kind if target != "python" else -1, target)
         self.R = params.R
         self.plane = table is None
         self.table = table
-        self._warm_up()
+        if target == "cpu":
+            self._warm_up()
 
     def _warm_up(self):
         """Compile (or load from numba's cache) every path now rather than in the middle of a run:
-        a batch of one penny at rest, and the one-penny rerun used when a buffer overflows."""
-        batch = self._fns["_flow_batch" if self.plane else "_advance_batch"]
+        a batch of one penny at rest, and the parallel loop (SERIAL_BELOW pennies)."""
+        batch = self._fns["advance_batch"]
         announce_compile("compiled batch", "open plane" if self.plane else type(self.table).__name__, self.model.kind,
                          batch.__wrapped__)
         from .parallel import SERIAL_BELOW, serial_now
@@ -433,57 +481,111 @@ class CompiledBatch:
             S[4] = 1.0
             zero = np.zeros(n)
             self.states_and_impacts(S, zero, zero, 1e-9)
-        if not self.plane:
-            self._fns["advance_through_m"]((0.0, 0.0, 0.0, 0.0, 1.0, 0.0), 0.0, 0.0, 1e-9, self.model)
+
+    def _call(self, name, *args, results=()):
+        """Run loop ``name`` on numpy arguments: as they are on the CPU, as memoryviews in plain Python
+        (indexing them gives Python floats, as the plain loop expects); on CUDA copied to the GPU, and the
+        arguments at the indices ``results`` (arrays or records of arrays) copied back."""
+        if self.target == "cpu":
+            return self._fns[name](*args)
+        if self.target == "python":
+            return self._fns[name](*map_arrays(args, memoryview))
+        from numba import cuda
+        dev = map_arrays(args, cuda.to_device)
+        self._fns[name](*dev)
+        for j in results:
+            for host, d in zip(flat_arrays((args[j],)), flat_arrays((dev[j],))):
+                d.copy_to_host(host)
 
     def first_impacts(self, S, acc1, acc2, horizon, rounds=64):
         """(t_hit (N,), end (N,) int8) of scalar.first_impact_resumed for each penny, in parallel."""
         n = S.shape[1]
         t = np.empty(n)
         end = np.empty(n, dtype=np.int64)
-        self._fns["_first_impact_batch"](np.ascontiguousarray(S, dtype=np.float64), np.ascontiguousarray(acc1, dtype=np.float64),
-                                         np.ascontiguousarray(acc2, dtype=np.float64),
-                                         np.ascontiguousarray(horizon, dtype=np.float64), self.model, int(rounds), t, end)
+        self._call("first_impact_batch", np.ascontiguousarray(S, dtype=np.float64),
+                   np.ascontiguousarray(acc1, dtype=np.float64), np.ascontiguousarray(acc2, dtype=np.float64),
+                   np.ascontiguousarray(horizon, dtype=np.float64), self.model, int(rounds), t, end, results=(6, 7))
         return t, end.astype(np.int8)
+
+    def advance(self, S, acc1, acc2, dt, stop_after=0, trig_out=None):
+        """(new S (6, N), buffers, elapsed (N,)) after one interval per penny (dt scalar or (N,)), stopping
+        a penny right after stop_after impacts (0: never). buffers: scalar.ImpactBuffers holding every
+        impact (pennies whose impacts overflowed the capacity were rerun alone with room for all: the
+        returned buffers' capacity is the largest count)."""
+        from .scalar import impact_buffers
+        S = np.ascontiguousarray(S, dtype=np.float64)
+        n = S.shape[1]
+        acc1 = np.ascontiguousarray(np.broadcast_to(acc1, (n,)), dtype=np.float64)
+        acc2 = np.ascontiguousarray(np.broadcast_to(acc2, (n,)), dtype=np.float64)
+        dts = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=np.float64), (n,)))
+        out = np.empty_like(S)
+        trig = np.empty((4, 0)) if trig_out is None else trig_out
+        if trig.shape[1] not in (0, n) or trig.shape[0] != 4 or trig.dtype != np.float64 or not trig.flags.c_contiguous:
+            raise ValueError(f"trig_out must be a C-contiguous float64 array of shape (4, {n})")
+        elapsed = np.empty(n)
+        buf = impact_buffers(n, self.CAPACITY)
+        self._call("advance_batch", S, acc1, acc2, dts, self.model, self.plane, int(stop_after), out, trig, elapsed, buf,
+                   results=(7, 8, 9, 10))
+        over = np.flatnonzero(buf.count > self.CAPACITY)
+        if over.size:  # more impacts than a slot row holds: rerun those pennies alone, with room for all
+            big = impact_buffers(n, int(buf.count.max()))
+            for name in ("time", "end", "post", "rest"):
+                getattr(big, name)[:, :self.CAPACITY] = getattr(buf, name)
+            big.count[:] = buf.count
+            big.arc_count[:] = buf.arc_count
+            for i in over:
+                one = impact_buffers(1, int(buf.count[i]))
+                col = np.empty((6, 1))
+                self._call("advance_batch", S[:, i:i + 1].copy(), acc1[i:i + 1].copy(), acc2[i:i + 1].copy(),
+                           dts[i:i + 1].copy(), self.model, self.plane, int(stop_after), col, np.empty((4, 0)),
+                           np.empty(1), one, results=(10,))
+                k = int(buf.count[i])
+                for name in ("time", "end", "post", "rest"):
+                    getattr(big, name)[i, :k] = getattr(one, name)[0]
+            buf = big
+        return out, buf, elapsed
 
     def states_and_impacts(self, S, acc1, acc2, dt, trig_out=None):
         """(new S (6, N), log) after one interval dt: log None when no penny hit the wall, else
         (env, time, end, post (k, 6)) sorted by penny then time. trig_out: optional (4, N) array
         that receives cos theta, sin theta, cos phi, sin phi of the new states (math.cos/sin)."""
-        S = np.ascontiguousarray(S, dtype=np.float64)
-        acc1 = np.ascontiguousarray(acc1, dtype=np.float64)
-        acc2 = np.ascontiguousarray(acc2, dtype=np.float64)
-        n = S.shape[1]
-        out = np.empty_like(S)
-        trig = np.empty((4, 0)) if trig_out is None else trig_out
-        if trig.shape[1] not in (0, n) or trig.shape[0] != 4 or trig.dtype != np.float64 or not trig.flags.c_contiguous:
-            raise ValueError(f"trig_out must be a C-contiguous float64 array of shape (4, {n})")
-        if self.plane:
-            self._fns["_flow_batch"](S, acc1, acc2, float(dt), self.R, out, trig)
-            return out, None
-        cap = IMPACT_CAPACITY
-        counts = np.zeros(n, dtype=np.int64)
-        times = np.empty((n, cap))
-        ends = np.empty((n, cap), dtype=np.int64)
-        posts = np.empty((n, cap, 6))
-        self._fns["_advance_batch"](S, acc1, acc2, float(dt), self.model, out, trig, counts, times, ends, posts)
-        total = int(counts.sum())
-        if total == 0:
-            return out, None
-        env = np.repeat(np.arange(n), counts)
-        rank = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-        stored = rank < cap
-        t = np.empty(total)
-        e = np.empty(total, dtype=np.int8)
-        post = np.empty((total, 6))
-        t[stored] = times[env[stored], rank[stored]]
-        e[stored] = ends[env[stored], rank[stored]]
-        post[stored] = posts[env[stored], rank[stored]]
-        for i in np.flatnonzero(counts > cap):  # more impacts than the buffer holds: rerun this penny alone
-            s = tuple(float(v) for v in S[:, i])
-            _, impacts, _, _ = self._fns["advance_through_m"](s, float(acc1[i]), float(acc2[i]), float(dt), self.model)
-            rows = np.flatnonzero(env == i)
-            t[rows] = [imp[0] for imp in impacts]
-            e[rows] = [imp[1] for imp in impacts]
-            post[rows] = [imp[2] for imp in impacts]
-        return out, (env, t, e, post)
+        out, buf, _ = self.advance(S, acc1, acc2, dt, 0, trig_out)
+        log = flat_log(buf)
+        return out, (None if log is None else log[:4])
+
+
+def flat_log(buf):
+    """The impacts of ImpactBuffers holding all of them, flattened and sorted by penny then time:
+    (env, time, end (int8), post (k, 6), rest flag (int8)), or None when there are none."""
+    counts = buf.count
+    total = int(counts.sum())
+    if total == 0:
+        return None
+    n = counts.shape[0]
+    env = np.repeat(np.arange(n), counts)
+    rank = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+    return (env, buf.time[env, rank], buf.end[env, rank].astype(np.int8), buf.post[env, rank],
+            buf.rest[env, rank].astype(np.int8))
+
+
+def map_arrays(args, f):
+    """args with every numpy array, also inside tuples and NamedTuples (ImpactBuffers), replaced by f(array)."""
+    def one(a):
+        if isinstance(a, np.ndarray):
+            return f(a)
+        if isinstance(a, tuple) and any(isinstance(v, np.ndarray) for v in a):
+            items = [one(v) for v in a]
+            return type(a)(*items) if hasattr(a, "_fields") else tuple(items)
+        return a
+    return tuple(one(a) for a in args)
+
+
+def flat_arrays(args):
+    """The arrays of args (and of their tuples), in order (for copying results back)."""
+    out = []
+    for a in args:
+        if isinstance(a, tuple):
+            out += flat_arrays(a)
+        elif not isinstance(a, (int, float, bool, np.generic)) and hasattr(a, "shape"):
+            out.append(a)
+    return out

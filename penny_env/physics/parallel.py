@@ -78,15 +78,16 @@ def serial_now() -> bool:
     return _FORKED_AFTER_OPENMP
 
 
-def locked(f, serial=None):
-    """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads), whose
-    first argument's last axis counts the pennies. ``serial()`` (the same function compiled without
+def locked(f, serial=None, count=None):
+    """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads);
+    count(args) gives the pennies of a call (default: the first argument's last axis). ``serial()`` (the same function compiled without
     ``parallel``, built on first use) runs instead in a child forked after OpenMP ran, and for fewer than
     :data:`SERIAL_BELOW` pennies, where waking the sleeping threads costs more than the work they share."""
     built = []
+    count = count or (lambda args: args[0].shape[-1])
 
     def call(*args):
-        if serial is not None and (_FORKED_AFTER_OPENMP or args[0].shape[-1] < SERIAL_BELOW):
+        if serial is not None and (_FORKED_AFTER_OPENMP or count(args) < SERIAL_BELOW):
             if not built:
                 built.append(serial())
             return built[0](*args)

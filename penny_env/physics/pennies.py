@@ -1,17 +1,18 @@
 """The per-penny event loop (physics/scalar.py) run over the pennies of a (6, N) batch.
 
-One event loop exists: scalar.advance_m (resumed by scalar.advance_through_m) for one penny in plain floats. Here it runs over a batch,
-either compiled and in parallel over the pennies (backend "numba", physics/compiled.py) or as
-plain Python (backend "python": the readable reference, for debugging and tests). Both give bitwise
-the same results (tests/test_compiled.py)."""
+One event loop exists: scalar.run_interval (scalar.advance_into, resumed by
+scalar.advance_through_into) for one penny in plain floats, writing into fixed-capacity buffers. Here
+it runs over a batch through physics/compiled.py's advance_batch, built by physics/builder.py:
+compiled and in parallel over the pennies (backend "numba") or as plain Python (backend "python": the
+readable reference, for debugging and tests). Both give bitwise the same results (tests/test_compiled.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import CompiledBatch, choose_backend
-from .scalar import advance_through_m, first_impact_resumed, scalar_model
+from .compiled import CompiledBatch, choose_backend, flat_log
+from .scalar import PINNED
 
 # rounds of a first-impact search resumed after its step budget (settings.max_search_steps) is spent
 FIRST_IMPACT_ROUNDS = 64
@@ -57,38 +58,20 @@ def advance_pennies(S, acc1, acc2, dt, params, table, law, settings, stop_after=
 
     Returns (new_states, log, elapsed): elapsed equals dt except for pennies stopped early by
     stop_after (a per-call impact count at which a penny stops right after its impact). backend
-    "python" runs scalar.advance_m penny by penny; "numba" or "auto" run the compiled batch where a
-    scalar dt and no stop_after allow it (rests are then not logged)."""
+    "python" runs the plain-Python loop penny by penny; "numba" or "auto" the compiled batch (the same
+    functions, physics/builder.py)."""
     S, n, acc1, acc2, dts = _columns(S, acc1, acc2, dt)
-    if backend != "python" and stop_after is None and np.ndim(dt) == 0:
-        if choose_backend(backend, params, table, law, settings, python="python") == "numba":
-            out, log = CompiledBatch(params, table, law, settings).states_and_impacts(S, acc1, acc2, float(dt))
-            if log is None:
-                return out, EventLog.empty(), dts.copy()
-            return out, EventLog(*log, np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)), dts.copy()
-    if table is None:
-        from .flows import flow
-        return flow(S, acc1, acc2, dts, params.R), EventLog.empty(), dts.copy()
-    m = scalar_model(params, table, law, settings)
-    stop = 0 if stop_after is None else int(stop_after)
-    out = np.empty_like(S)
-    elapsed = np.zeros(n)
-    rows, rest_rows = [], []
-    for i in range(n):
-        s, impacts, rests, el = advance_through_m(tuple(float(v) for v in S[:, i]), float(acc1[i]), float(acc2[i]),
-                                                  float(dts[i]), m, stop)
-        out[:, i] = s
-        elapsed[i] = el
-        rows += [(i, t, e, post) for t, e, post in impacts]
-        rest_rows += [(i, t, p) for t, p in rests]
-    if not rows:
-        log = EventLog.empty()
-    else:
-        log = EventLog(np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows]),
-                       np.array([r[2] for r in rows], dtype=np.int8), np.array([r[3] for r in rows], dtype=float).reshape(-1, 6),
-                       np.array([r[0] for r in rest_rows], dtype=np.int64), np.array([r[1] for r in rest_rows], dtype=float),
-                       np.array([r[2] for r in rest_rows], dtype=bool))
-    return out, log, elapsed
+    target = "python"
+    if backend != "python" and choose_backend(backend, params, table, law, settings, python="python") == "numba":
+        target = "cpu"
+    out, buf, elapsed = CompiledBatch(params, table, law, settings, target=target).advance(
+        S, acc1, acc2, dts, 0 if stop_after is None else int(stop_after))
+    log = flat_log(buf)
+    if log is None:
+        return out, EventLog.empty(), elapsed
+    env, t, end, post, rest = log
+    r = rest != 0
+    return out, EventLog(env, t, end, post, env[r], t[r], rest[r] == PINNED), elapsed
 
 
 def first_impacts(S, acc1, acc2, horizon, params, table, settings, backend="python"):
@@ -97,12 +80,6 @@ def first_impacts(S, acc1, acc2, horizon, params, table, settings, backend="pyth
     from .laws import ImpactLaw
     S, n, acc1, acc2, horizon = _columns(S, acc1, acc2, horizon)
     law = ImpactLaw("elastic", 1.0)  # the search does not depend on the law
-    if choose_backend(backend, params, table, law, settings, python="python") == "numba":
-        return CompiledBatch(params, table, law, settings).first_impacts(S, acc1, acc2, horizon, FIRST_IMPACT_ROUNDS)
-    m = scalar_model(params, table, law, settings)
-    t = np.empty(n)
-    end = np.empty(n, dtype=np.int8)
-    for i in range(n):
-        t[i], end[i] = first_impact_resumed(tuple(float(v) for v in S[:, i]), float(acc1[i]), float(acc2[i]),
-                                            float(horizon[i]), m, FIRST_IMPACT_ROUNDS)
-    return t, end
+    target = "cpu" if choose_backend(backend, params, table, law, settings, python="python") == "numba" else "python"
+    return CompiledBatch(params, table, law, settings, target=target).first_impacts(S, acc1, acc2, horizon,
+                                                                                   FIRST_IMPACT_ROUNDS)

@@ -374,26 +374,93 @@ def pushes_out1(s, acc1, acc2, m, delta):
     return False
 
 
-def advance_m(s, acc1, acc2, dt, m, stop_after):
-    """One penny over one control interval with walls (module docstring); stop_after <= 0: no limit.
+# -- the impact buffers: caller-owned, fixed capacity (no lists, so that GPU code can run the loop) ------
+REST, PINNED = 1, 2  # ImpactBuffers.rest: the impact brought the penny to rest (PINNED: held by the controls)
+NO_ARC = (0.0, 0.0, 2.0)   # record_impact's arc (cos b, sin b, cos half-width): no marked arc, nothing counted
+WHOLE_WALL = 2.0, -2.0      # cos half-width values: none of the wall / all of it (p.b >= -2 |p| for any p)
 
-    Returns (state, impacts, rests, elapsed): impacts is a list of (time, end, post_state),
-    rests a list of (time, pinned). The call stops early, right after an impact, with elapsed < dt
-    and the state reached (speeds untouched), after stop_after impacts or after m.max_events impacts
-    (SolverSettings.max_events_per_interval: it bounds the work and the impact list of one call,
-    never the physics); the caller resumes from there (:func:`advance_through_m`).
+
+class ImpactBuffers(NamedTuple):
+    """Where the event loop writes the impacts of N pennies over one call: fixed capacity K per penny,
+    owned by the caller (:func:`impact_buffers`). Row i belongs to penny i.
+
+    count (N,) int64      the impacts of the call, all of them (also those past the capacity)
+    time (N, K)           their times since the interval's start [s]
+    end (N, K) int8       +1 front, -1 back
+    post (N, K, 6)        the state right after each impact
+    rest (N, K) int8      0, REST (the impact ended an accumulation: the penny is at rest) or PINNED (at
+                          rest and held against the wall by the controls until the interval ends)
+    arc_count (N,) int64  impacts whose contact point lies on the marked arc (record_impact's ``arc``)
+
+    The slots hold the first K impacts; the overflow flag of penny i is ``count[i] > K``
+    (:func:`overflowed`): its caller reruns that penny with a larger buffer (the loop is a pure
+    function of its inputs) or reports the count alone."""
+
+    count: object
+    time: object
+    end: object
+    post: object
+    rest: object
+    arc_count: object
+
+
+def impact_buffers(n, capacity, empty=False) -> ImpactBuffers:
+    """ImpactBuffers (numpy) for n pennies with ``capacity`` slots each, zeroed (empty: uninitialised, for
+    a caller whose loop clears every row it uses, as the vector env's step does)."""
+    import numpy as np
+    new = np.empty if empty else np.zeros
+    return ImpactBuffers(np.zeros(n, dtype=np.int64), new((n, capacity)), new((n, capacity), dtype=np.int8),
+                         new((n, capacity, 6)), new((n, capacity), dtype=np.int8), np.zeros(n, dtype=np.int64))
+
+
+def overflowed(buf):
+    """The overflow flags of ImpactBuffers (N,): more impacts than the slots hold."""
+    return buf.count > buf.time.shape[1]
+
+
+def clear_row(buf, row):
+    """Row ``row`` of buf emptied (count and arc count 0) before a call writes into it."""
+    buf.count[row] = 0
+    buf.arc_count[row] = 0
+
+
+def record_impact(buf, row, t, end, post, rest, arc, m):
+    """Impact (t, end, post, rest flag) appended to row ``row`` of buf (stored while a slot is free,
+    counted always). arc = (cos b, sin b, cos h): the impact counts in buf.arc_count when its contact
+    point p (the end on the wall) satisfies p . (cos b, sin b) >= cos h |p| (cos h = 2: no arc marked)."""
+    j = buf.count[row]
+    if j < buf.time.shape[1]:
+        buf.time[row, j] = t
+        buf.end[row, j] = end
+        buf.rest[row, j] = rest
+        for r in range(6):
+            buf.post[row, j, r] = post[r]
+    buf.count[row] = j + 1
+    if arc[2] < 1.5:
+        sR = end * m.R
+        px = post[0] + sR * math.cos(post[3])
+        py = post[1] + sR * math.sin(post[3])
+        if px * arc[0] + py * arc[1] >= arc[2] * math.sqrt(px * px + py * py):
+            buf.arc_count[row] += 1
+
+
+def advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
+    """One penny over one control interval with walls (module docstring); stop_after <= 0: no limit.
+    The impacts go into row ``row`` of the ImpactBuffers buf (:func:`record_impact`), at times
+    base + (time since this call's start); the row is not cleared.
+
+    Returns (state, elapsed). The call stops early, right after an impact, with elapsed < dt and the
+    state reached (speeds untouched), after stop_after impacts or after m.max_events impacts
+    (SolverSettings.max_events_per_interval: it bounds the work of one call, never the physics); the
+    caller resumes from there (:func:`advance_through_into`).
 
     Only an accumulation brings a penny to rest: m.zeno_impacts consecutive impacts each closer
     than the time-resolution window to the previous one, under a dissipative law. An elastic
     penny is never stopped (it keeps its energy; tables too narrow for the search to resolve its
     impacts are refused up front, validation.check_table)."""
     R = m.R
-    impacts = [(0.0, 0, s)]  # typed by example (numba); removed below
-    rests = [(0.0, False)]
-    impacts.pop()
-    rests.pop()
     if not dt > 0.0:
-        return s, impacts, rests, 0.0
+        return s, 0.0
     elapsed = 0.0
     n_events = 0
     streak = 0
@@ -402,7 +469,7 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
         rem = dt - elapsed
         t_hit, end = first_impact_m(s, acc1, acc2, rem, m)
         if end == 0:
-            return flow1(s, acc1, acc2, rem, R), impacts, rests, dt
+            return flow1(s, acc1, acc2, rem, R), dt
         pre = relocate1(flow1(s, acc1, acc2, t_hit, R), m)
         if end == 2 or wall1(pre, float(end), m)[1] <= 0.0:
             # search budget spent on a tangency, or a grazing touch that turned inward: go on from there
@@ -419,43 +486,87 @@ def advance_m(s, acc1, acc2, dt, m, stop_after):
         window = max(m.zeno_window, 8.0 * time_resolution(delta, M, SCALAR))
         streak = streak + 1 if t_hit < window else 0
         done = False
+        rest = 0
         if streak >= m.zeno_impacts and not m.elastic:
             post = (post[0], post[1], post[2], post[3], 0.0, 0.0)
             streak = 0
-            pinned = pushes_out1(post, acc1, acc2, m, 64 * delta)
-            rests.append((t_impact, pinned))
-            if pinned:
+            rest = REST
+            if pushes_out1(post, acc1, acc2, m, 64 * delta):
+                rest = PINNED
                 done = True
                 elapsed = dt
-        impacts.append((t_impact, end, post))
+        record_impact(buf, row, base + t_impact, end, post, rest, arc, m)
         if (stop_after > 0 and n_events >= stop_after) or n_events >= m.max_events:
             done = True
         s = post
         if done:
-            return s, impacts, rests, elapsed
+            return s, elapsed
 
 
-def advance_through_m(s, acc1, acc2, dt, m, stop_after=0):
-    """:func:`advance_m` over the whole interval: resumes after each call that the per-call event cap
+def advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc):
+    """:func:`advance_into` over the whole interval: resumed after each call that the per-call event cap
     stopped early, so the motion is that of one uninterrupted call (the one resumption loop of the
-    package: the env step, the batch API and the renderer call it). Returns (state, impacts, rests,
-    elapsed) with the times counted from the interval's start; elapsed is dt, or less when stop_after
-    > 0 impacts were reached (the state is then the one right after that impact)."""
-    s, impacts, rests, elapsed = advance_m(s, acc1, acc2, dt, m, stop_after)
-    while elapsed < dt and not (stop_after > 0 and len(impacts) >= stop_after):
+    package). Returns (state, elapsed); the impacts go into row ``row`` of buf (not cleared), their
+    times counted from the interval's start; elapsed is dt, or less when stop_after > 0 impacts were
+    reached (the state is then the one right after that impact)."""
+    first = buf.count[row]
+    s, elapsed = advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, 0.0, arc)
+    while elapsed < dt and not (stop_after > 0 and buf.count[row] - first >= stop_after):
         rem = dt - elapsed
-        s, more, more_rests, step = advance_m(s, acc1, acc2, rem, m, stop_after - len(impacts) if stop_after > 0 else 0)
-        for k in range(len(more)):
-            t_k, end_k, post_k = more[k]
-            impacts.append((elapsed + t_k, end_k, post_k))
-        for k in range(len(more_rests)):
-            t_k, pinned_k = more_rests[k]
-            rests.append((elapsed + t_k, pinned_k))
+        left = stop_after - (buf.count[row] - first) if stop_after > 0 else 0
+        s, step = advance_into(s, acc1, acc2, rem, m, left, buf, row, elapsed, arc)
         if not step < rem:  # reached the interval's end
             elapsed = dt
             break
         elapsed += step
+    return s, elapsed
+
+
+def run_interval(s, c_ph, s_ph, acc1, acc2, dt, m, plane, resume, stop_after, buf, row, arc):
+    """The penny over one interval, the one driver of the event loop (the env step, simulate, the batch
+    API and the renderer's impacts all come from it): row ``row`` of buf is cleared, then the interval
+    is one flow where there is no wall (plane) or where the certificate (:func:`certified_free_trig`,
+    given c_ph, s_ph = cos, sin of the heading s[3]) shows it free of impacts; otherwise the event loop
+    runs, resumed after the per-call event cap when ``resume`` (:func:`advance_through_into`), else one
+    call (:func:`advance_into`: the env step, which ends the episode where the cap stopped it).
+    Returns (state, elapsed)."""
+    clear_row(buf, row)
+    if plane or certified_free_trig(s, c_ph, s_ph, acc1, acc2, dt, m):
+        return flow1(s, acc1, acc2, dt, m.R), dt
+    if resume:
+        return advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc)
+    return advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, 0.0, arc)
+
+
+# -- lists of impacts, in plain Python (tests, analysis): the loop above with a buffer ---------------------
+def impacts_of(buf, row):
+    """(impacts, rests) of row ``row`` of buf as lists: (time, end, post_state) and (time, pinned)."""
+    n = min(int(buf.count[row]), buf.time.shape[1])
+    impacts = [(float(buf.time[row, j]), int(buf.end[row, j]), tuple(float(v) for v in buf.post[row, j]))
+               for j in range(n)]
+    rests = [(float(buf.time[row, j]), bool(buf.rest[row, j] == PINNED)) for j in range(n) if buf.rest[row, j]]
+    return impacts, rests
+
+
+def _with_lists(run, capacity):
+    buf = impact_buffers(1, capacity)
+    s, elapsed = run(buf)
+    if buf.count[0] > capacity:  # the loop is pure: run it again with room for every impact
+        buf = impact_buffers(1, int(buf.count[0]))
+        s, elapsed = run(buf)
+    impacts, rests = impacts_of(buf, 0)
     return s, impacts, rests, elapsed
+
+
+def advance_m(s, acc1, acc2, dt, m, stop_after):
+    """:func:`advance_into` with lists (plain Python): (state, impacts, rests, elapsed), impacts a list of
+    (time, end, post_state), rests of (time, pinned)."""
+    return _with_lists(lambda buf: advance_into(s, acc1, acc2, dt, m, stop_after, buf, 0, 0.0, NO_ARC), 64)
+
+
+def advance_through_m(s, acc1, acc2, dt, m, stop_after=0):
+    """:func:`advance_through_into` with lists (plain Python), as :func:`advance_m`."""
+    return _with_lists(lambda buf: advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, 0, NO_ARC), 64)
 
 
 # -- the physics-object API (simulate, tests, analysis) ------------------------------------------------

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .scalar import advance_m, certified_flow1, flow1, relocate1, scalar_model
+from .scalar import NO_ARC, flow1, impact_buffers, impacts_of, overflowed, relocate1, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
 from .laws import apply_law, make_law
 from .params import PennyParams, SolverSettings
@@ -149,7 +149,8 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         k_steps, last_dt = interval_grid(t_final, grid)
         if u is not None and k_steps > u.shape[0]:
             raise ValueError(f"t_final={t_final} is beyond the controls' horizon {u.shape[0] * cdt} (len(controls) * control_dt)")
-    model = None if table is None else scalar_model(params, table, law, settings)
+    model = scalar_model(params, table, law, settings)
+    buf = impact_buffers(1, 64)
     times, ends, states, rests = [], [], [], []
     # dense output: segments (start time, start state, accelerations), one per impact and per control
     # interval (free motion needs none at interval boundaries: the flow from the last start is exact)
@@ -174,41 +175,34 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             break
         check_speed_bound(state, acc1, acc2, dt, params, "controls" if u is not None else "state",
                           k if u is not None else None)
-        # the interval, resumed wherever the per-call event cap stopped it (as scalar.advance_through_m)
-        off = 0.0
-        hit = False
-        while True:
-            left = None if n_impacts is None else n_impacts - len(times)
-            rem = dt - off
-            free, s1 = (True, flow1(state, acc1, acc2, rem, params.R)) if model is None else \
-                certified_flow1(state, acc1, acc2, rem, model)
-            if free:  # the search's first step certifies the interval free of impacts: what advance_m returns
-                state, impacts, rest_events, elapsed = s1, (), (), rem
-            else:
-                state, impacts, rest_events, elapsed = advance_m(state, acc1, acc2, rem, model,
-                                                                 0 if left is None else left)
-            if len(times) + len(impacts) > settings.max_impacts:
-                asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
-                raise ValueError(f"{asked}: the run passed SolverSettings.max_impacts = {settings.max_impacts} "
-                                 f"impacts at t = {t0 + off + elapsed:.6g} s (bounded memory); ask for fewer, continue "
-                                 "from a shorter run's final_state, or raise SolverSettings.max_impacts")
-            for ti, end, post in impacts:
-                times.append(t0 + (off + ti))
-                ends.append(end)
-                states.append(post)
-                seg_t.append(times[-1])
-                seg_s.append(post)
-                seg_acc.append((acc1, acc2))
-            for tr, pinned in rest_events:
-                rests.append(t0 + (off + tr))
-                if pinned:  # held against the wall until the interval ends
-                    seg_acc[-1] = (0.0, 0.0)
-            hit = hit or bool(impacts)
-            if n_impacts is not None and len(times) >= n_impacts:
-                break
-            if not elapsed < rem:
-                break
-            off += elapsed
+        # the interval, resumed wherever the per-call event cap stopped it (scalar.run_interval, the
+        # event loop's one driver), stopping after the n_impacts-th impact
+        left = 0 if n_impacts is None else n_impacts - len(times)
+        drive = lambda b: run_interval(state, math.cos(state[3]), math.sin(state[3]), acc1, acc2, dt, model,  # noqa: E731
+                                       table is None, True, left, b, 0, NO_ARC)
+        s1, elapsed = drive(buf)
+        if len(times) + buf.count[0] > settings.max_impacts:
+            asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
+            raise ValueError(f"{asked}: the run passed SolverSettings.max_impacts = {settings.max_impacts} "
+                             f"impacts by t = {t0 + elapsed:.6g} s (bounded memory); ask for fewer, continue "
+                             "from a shorter run's final_state, or raise SolverSettings.max_impacts")
+        if overflowed(buf)[0]:  # more impacts than the buffer holds: the same pure call with room for all
+            buf = impact_buffers(1, int(buf.count[0]))
+            s1, elapsed = drive(buf)
+        state = s1
+        impacts, rest_events = impacts_of(buf, 0)
+        for ti, end, post in impacts:
+            times.append(t0 + ti)
+            ends.append(end)
+            states.append(post)
+            seg_t.append(times[-1])
+            seg_s.append(post)
+            seg_acc.append((acc1, acc2))
+        for tr, pinned in rest_events:
+            rests.append(t0 + tr)
+            if pinned:  # held against the wall until the interval ends
+                seg_acc[-1] = (0.0, 0.0)
+        hit = bool(impacts)
         if n_impacts is not None and len(times) >= n_impacts:
             t = times[-1]
             break

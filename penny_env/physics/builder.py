@@ -1,0 +1,217 @@
+"""One builder for the three targets of the package's plain-Python functions.
+
+The physics (kernels.py, flows.py, scalar.py, the tables' formulas, the laws) and the environment's step
+(envs/functional.py, envs/tasks.py) are written once, as plain Python on floats and tuples. A
+:class:`Builder` compiles copies of those very functions for one target:
+
+* ``"python"``: the functions as they are (no copy): the readable reference, for debugging and for the
+  tests that compare the compiled targets with it;
+* ``"cpu"``: numba copies whose globals are one shared namespace (the math namespace ``SCALAR`` becomes
+  physics/numba_math.py), cached on disk where allowed (compiled.py's cache rules), and the loops over
+  pennies compiled with ``parallel=True`` (numba ``prange``) plus a serial copy (physics/parallel.py);
+* ``"cuda"``: numba-cuda device functions of the same copies (``SCALAR`` becomes physics/cuda_math.py),
+  and each loop over pennies becomes a kernel with one thread per penny.
+
+A loop over pennies is a plain function whose body is one call of a per-penny function with the index
+first, ``for i in prange(N): body(i, a, b, ...)`` (compiled.advance_batch, functional.step_envs). The
+CPU and Python targets run that function (``prange`` is ``range`` in plain Python); for CUDA,
+:meth:`Builder.kernel` generates the kernel ``i = cuda.grid(1); if i < N: body(i, a, b, ...)`` from the
+body's signature. So the per-penny work is the same function on all three targets, and only the
+two-line glue differs.
+
+The copies of one build share one namespace: a function calls the copies of its callees, never the
+plain Python ones. Every copy's name carries the table variant and a hash of all the sources it
+inlines (compiled.source_digest), so numba's disk cache can never serve stale machine code.
+"""
+from __future__ import annotations
+
+import builtins
+import functools
+import inspect
+import types
+
+import numpy as np
+
+TARGETS = ("python", "cpu", "cuda")
+CUDA_THREADS = 128  # threads per block of the kernels (one penny per thread)
+
+
+def check_target(target) -> str:
+    if not isinstance(target, str):
+        raise TypeError(f"target must be a str, one of {TARGETS}, got {type(target).__name__}")
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
+    return target
+
+
+@functools.lru_cache(maxsize=None)
+def cuda_available() -> bool:
+    """numba-cuda is installed and a CUDA device (or numba's CUDA simulator) is usable (checked once). Without
+    the simulator, a machine whose CUDA driver library does not load has no GPU: answered without importing
+    numba.cuda (about 1.5 s)."""
+    import importlib.util
+    import os
+    if importlib.util.find_spec("numba_cuda") is None:
+        return False
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") != "1":
+        import ctypes
+        try:
+            ctypes.CDLL("libcuda.so.1" if os.name != "nt" else "nvcuda.dll")
+        except OSError:
+            return False
+    try:
+        from numba import cuda
+    except ImportError:
+        return False
+    try:
+        return bool(cuda.is_available())
+    except Exception:  # noqa: BLE001 (a broken driver means no GPU for us)
+        return False
+
+
+class Builder:
+    """Copies of plain-Python functions compiled for one target, sharing one namespace.
+
+    ``Builder(target, variant, cache)``: variant names the copies (compiled.variant_name + a sources
+    digest); cache: CPU copies may go to numba's disk cache. :meth:`add` puts a module's names (or any
+    mapping) into the namespace, :meth:`copy` compiles a function's copy for the target (and stores it
+    under the function's name), :meth:`loop` the loop over pennies, :meth:`kernel` its CUDA kernel."""
+
+    def __init__(self, target: str, variant: str, cache: bool = False):
+        self.target = check_target(target)
+        self.variant = variant
+        self.cache = bool(cache) and target == "cpu"
+        self.namespace: dict = {"__builtins__": builtins}
+        if target == "cpu":
+            import numba
+
+            from . import numba_math
+            self.math = numba_math
+            self._jit = numba.njit(cache=self.cache)
+            self._inline = numba.njit(cache=self.cache, inline="always")
+            self._parallel = numba.njit(cache=self.cache, parallel=True)
+            self.namespace["prange"] = numba.prange
+        elif target == "cuda":
+            from numba import cuda
+
+            from . import cuda_math
+            self.math = cuda_math.namespace()
+            self._jit = self._inline = cuda.jit(device=True)
+            self.namespace["prange"] = range
+            self.namespace["cuda"] = cuda
+        else:
+            self.math = None
+
+    # -- the namespace ---------------------------------------------------------------------------
+    def add(self, source) -> None:
+        """Every public and private name of a module (or a mapping), dunders excepted; the math
+        namespaces SCALAR / ARRAY / XP are the target's."""
+        items = vars(source).items() if isinstance(source, types.ModuleType) else dict(source).items()
+        self.namespace.update({k: v for k, v in items if not k.startswith("__")})
+        for name in ("SCALAR", "ARRAY", "XP"):
+            if name in self.namespace and self.math is not None:
+                self.namespace[name] = self.math
+
+    def copy(self, f, *, inline=False, jit=None, suffix=""):
+        """The target's copy of plain function f with this build's namespace as its globals, stored in
+        the namespace under f's name (python: f itself). inline: numba-inlined into its callers (CPU;
+        device functions are inlined by the CUDA compiler anyway). jit: another numba decorator."""
+        if self.target == "python":
+            return f
+        compiler = jit or (self._inline if inline else self._jit)
+        from .compiled import jit_copy
+        out = jit_copy(f, self.namespace, compiler, self.variant + suffix, math=self.math)
+        self.namespace[f.__name__] = out
+        return out
+
+    def copies(self, functions, **kw) -> None:
+        for f in functions:
+            self.copy(f, **kw)
+
+    def loop(self, f, entry=None, count=None):
+        """The loop over pennies f, compiled for the target: CPU, parallel (``prange``) with a serial copy
+        for small batches and forked children, under parallel.locked; CUDA, :meth:`kernel` of f's body;
+        python, f itself. entry: a plain function that unpacks its arguments and calls f (the loop is then
+        called through the entry's copy, bound to the parallel or the serial loop); count(args): the
+        pennies of a call (default: the first argument's last axis)."""
+        if self.target == "cuda":
+            return self.kernel(f)
+        if self.target == "python":
+            self.namespace[f.__name__] = f
+            return entry or f
+        from . import parallel
+        from .compiled import jit_copy
+        fast = self.copy(f, jit=self._parallel)
+        if entry is not None:
+            fast = self.copy(entry)
+
+        def serial():
+            ns = dict(self.namespace)
+            loop = jit_copy(f, ns, self._jit, f"{self.variant}_serial", math=self.math)
+            if entry is None:
+                return loop
+            ns[f.__name__] = loop
+            return jit_copy(entry, ns, self._jit, f"{self.variant}_serial", math=self.math)
+        return parallel.locked(fast, serial, count)
+
+    def kernel(self, loop):
+        """The CUDA kernel of a loop over pennies: ``loop`` is ``for i in prange(COUNT): BODY(i, args)``
+        (its source is read for COUNT and BODY); the kernel runs BODY(i, args) in thread i < COUNT. Returns
+        a launcher called like the loop (device arrays, or objects with __cuda_array_interface__)."""
+        from numba import cuda
+        body, count = loop_parts(loop)
+        params = list(inspect.signature(loop).parameters)
+        args = ", ".join(params)
+        source = (f"def {loop.__name__}_kernel({args}):\n    i = cuda.grid(1)\n    if i < {count}:\n"
+                  f"        {body}(i, {args})\n")
+        scope = dict(self.namespace)
+        exec(compile(source, f"<penny_env kernel {loop.__name__}>", "exec"), scope)
+        kern = cuda.jit(scope[f"{loop.__name__}_kernel"])
+        count_of = eval(f"lambda {args}: {count}")  # noqa: S307 (our own loop's count expression)
+
+        def launch(*a):
+            n = int(count_of(*a))
+            if n > 0:
+                threads = min(CUDA_THREADS, 32 * ((n + 31) // 32))  # (a small batch: one or a few warps)
+                kern[(n + threads - 1) // threads, threads](*a)
+        launch.__name__ = loop.__name__
+        launch.kernel = kern
+        launch.source = source
+        return launch
+
+
+@functools.lru_cache(maxsize=None)
+def loop_parts(loop) -> tuple[str, str]:
+    """(body name, count expression) of a loop written ``for i in prange(COUNT):`` followed by one call
+    ``BODY(i, <the loop's own arguments in order>)``; ValueError for any other shape (a kernel must do
+    exactly what the CPU loop does)."""
+    import ast
+    import textwrap
+
+    tree = ast.parse(textwrap.dedent(inspect.getsource(loop)))
+    fn = tree.body[0]
+    stmts = [s for s in fn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+    params = [a.arg for a in fn.args.args]
+    ok = (len(stmts) == 1 and isinstance(stmts[0], ast.For) and isinstance(stmts[0].iter, ast.Call)
+          and getattr(stmts[0].iter.func, "id", "") == "prange" and len(stmts[0].iter.args) == 1
+          and len(stmts[0].body) == 1 and isinstance(stmts[0].body[0], ast.Expr)
+          and isinstance(stmts[0].body[0].value, ast.Call))
+    if ok:
+        call = stmts[0].body[0].value
+        names = [getattr(a, "id", None) for a in call.args]
+        ok = names == [stmts[0].target.id] + params and isinstance(call.func, ast.Name)
+    if not ok:
+        raise ValueError(f"{loop.__name__}: a loop over pennies must be 'for i in prange(COUNT): BODY(i, <its arguments>)'")
+    return call.func.id, ast.unparse(stmts[0].iter.args[0])
+
+
+def as_device_arrays(obj):
+    """Objects with __cuda_array_interface__ (torch tensors, CuPy arrays) as numba device arrays, zero-copy,
+    through tuples and NamedTuples (the kernels' records); other values unchanged."""
+    from numba import cuda
+    if hasattr(obj, "__cuda_array_interface__") and not isinstance(obj, np.ndarray):
+        return cuda.as_cuda_array(obj)
+    if isinstance(obj, tuple):
+        items = [as_device_arrays(v) for v in obj]
+        return type(obj)(*items) if hasattr(obj, "_fields") else tuple(items)
+    return obj
