@@ -131,3 +131,35 @@ def test_the_users_threading_layer_choice_is_kept():
     if code != 0 and "threading layer" in out and "omp" in out.lower() and "could not" in out.lower():
         pytest.skip("numba's OpenMP layer does not load here")
     assert code == 0 and "layer omp" in out, out
+
+
+def test_the_parallel_loops_equal_the_serial_ones_on_a_walled_table():
+    # the vector step and the batch's event loop at SERIAL_BELOW + 8 pennies (parallel, prange) against the
+    # same pennies in calls of 8 (the calling thread): bitwise, with impacts (their records' writes must land)
+    import numpy as np
+
+    from penny_env import PennyVectorEnv
+    import penny_env.batch as pb
+    from penny_env.physics.parallel import SERIAL_BELOW
+    n = SERIAL_BELOW + 8
+    big, small = PennyVectorEnv(n, "stadium", "impacts"), PennyVectorEnv(8, "stadium", "impacts")
+    ob, _ = big.reset(seed=5)
+    os_, _ = small.reset(seed=5)
+    assert np.array_equal(ob[:8], os_)
+    rng = np.random.default_rng(0)
+    impacts = 0
+    for _ in range(40):
+        a = rng.uniform(-1, 1, (n, 2))
+        rb, rs = big.step(a), small.step(a[:8])
+        for x, y in zip(rb[:4], rs[:4]):
+            assert np.array_equal(x[:8], y)
+        assert np.array_equal(rb[4]["impacts"][:8], rs[4]["impacts"]) and np.array_equal(rb[4]["kinetic_energy"][:8], rs[4]["kinetic_energy"])
+        impacts += int(rb[4]["impacts"].sum())
+    assert impacts > 100
+    S = np.zeros((n, 6))
+    S[:, 4] = 20.0
+    S[:, 3] = np.linspace(0, 6, n)
+    whole = pb.simulate(S, table={"kind": "circle", "r": 0.12}, law="elastic", t_final=2.0)
+    part = pb.simulate(S[:8], table={"kind": "circle", "r": 0.12}, law="elastic", t_final=2.0)
+    assert np.array_equal(whole.final_states[:8], part.final_states) and whole.impact_counts[:8].sum() > 16
+    assert np.array_equal(whole.impact_counts[:8], part.impact_counts)

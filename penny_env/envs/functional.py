@@ -381,7 +381,9 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
         single = b.copy(env_step_packed)
         # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
         b.copy(env_step, inline=True)
-        b.copies((step_env, observe_row), inline=True)
+        # the loops' bodies as plain calls: numba-inlined into a prange loop, a body's writes through a record's
+        # arrays are lost (numba 0.68; tests/test_parallel.py checks the parallel loop against the serial one)
+        b.copies((step_env, observe_row))
         fns = {"env_step": single,
                # one parallel call at a time (parallel.locked), serially for few envs or in a forked child
                "step_envs": b.loop(step_envs, entry=step_envs_packed, count=_vector_count)}

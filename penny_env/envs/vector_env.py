@@ -463,6 +463,11 @@ class PennyVectorEnv(VectorEnv):
             info["_arc_impacts"] = t.copy()
         return info
 
+    @property
+    def array_namespace(self) -> str:
+        """"torch" where the step returns torch tensors (the CUDA backend's default outputs), else "numpy"."""
+        return "torch" if getattr(self, "_gpu", None) is not None and self._gpu.outputs == "torch" else "numpy"
+
     # -- state access ---------------------------------------------------------------------
     @property
     def states(self) -> np.ndarray:

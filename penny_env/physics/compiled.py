@@ -380,7 +380,10 @@ def _physics_build(target, kind):
     functions = {f.__name__: b.namespace[f.__name__] for f in sources}
     functions.update(advance_into=b.namespace["advance_into"], advance_through_into=b.namespace["advance_through_into"])
     # the per-penny bodies and their loops (parallel over pennies on the CPU, a kernel on CUDA)
-    b.copies((angle_trig_into, advance_penny, first_impact_penny), inline=True)
+    # (the loops' bodies are not numba-inlined: an inlined body's writes through a record's arrays are
+    # lost in a prange loop, numba 0.68; LLVM inlines the call anyway)
+    b.copies((angle_trig_into,), inline=True)
+    b.copies((advance_penny, first_impact_penny))
     for loop in (advance_batch, first_impact_batch):  # called under parallel.PARALLEL_LOCK on the CPU
         functions[loop.__name__] = b.loop(loop)
     b.functions = functions
@@ -444,7 +447,7 @@ def first_impact_batch(S, acc1, acc2, horizon, m, rounds, t_out, end_out):
 class CompiledBatch:
     """The per-penny event loop over one interval for (6, N) batches, on one target (physics/builder.py):
     "cpu" (numba, parallel over pennies, the default), "cuda" (one GPU thread per penny) or "python" (the
-    plain functions: the readable reference). :meth:`states_and_impacts`, :meth:`advance`,
+    plain functions: the readable reference). :meth:`states_and_impacts`, :meth:`run_intervals`,
     :meth:`first_impacts`.
 
     ``CompiledBatch(params, table, law, settings, target="cpu")``; table None is the open plane. Raises
@@ -507,7 +510,7 @@ class CompiledBatch:
                    np.ascontiguousarray(horizon, dtype=np.float64), self.model, int(rounds), t, end, results=(6, 7))
         return t, end.astype(np.int8)
 
-    def advance(self, S, acc1, acc2, dt, stop_after=0, trig_out=None):
+    def run_intervals(self, S, acc1, acc2, dt, stop_after=0, trig_out=None):
         """(new S (6, N), buffers, elapsed (N,)) after one interval per penny (dt scalar or (N,)), stopping
         a penny right after stop_after impacts (0: never). buffers: scalar.ImpactBuffers holding every
         impact (pennies whose impacts overflowed the capacity were rerun alone with room for all: the
@@ -523,7 +526,7 @@ class CompiledBatch:
         if trig.shape[1] not in (0, n) or trig.shape[0] != 4 or trig.dtype != np.float64 or not trig.flags.c_contiguous:
             raise ValueError(f"trig_out must be a C-contiguous float64 array of shape (4, {n})")
         elapsed = np.empty(n)
-        buf = impact_buffers(n, self.CAPACITY)
+        buf = impact_buffers(n, self.CAPACITY, empty=True)  # (run_interval clears every row it writes)
         self._call("advance_batch", S, acc1, acc2, dts, self.model, self.plane, int(stop_after), out, trig, elapsed, buf,
                    results=(7, 8, 9, 10))
         over = np.flatnonzero(buf.count > self.CAPACITY)
@@ -549,7 +552,7 @@ class CompiledBatch:
         """(new S (6, N), log) after one interval dt: log None when no penny hit the wall, else
         (env, time, end, post (k, 6)) sorted by penny then time. trig_out: optional (4, N) array
         that receives cos theta, sin theta, cos phi, sin phi of the new states (math.cos/sin)."""
-        out, buf, _ = self.advance(S, acc1, acc2, dt, 0, trig_out)
+        out, buf, _ = self.run_intervals(S, acc1, acc2, dt, 0, trig_out)
         log = flat_log(buf)
         return out, (None if log is None else log[:4])
 

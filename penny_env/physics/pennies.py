@@ -64,7 +64,7 @@ def advance_pennies(S, acc1, acc2, dt, params, table, law, settings, stop_after=
     target = "python"
     if backend != "python" and choose_backend(backend, params, table, law, settings, python="python") == "numba":
         target = "cpu"
-    out, buf, elapsed = CompiledBatch(params, table, law, settings, target=target).advance(
+    out, buf, elapsed = CompiledBatch(params, table, law, settings, target=target).run_intervals(
         S, acc1, acc2, dts, 0 if stop_after is None else int(stop_after))
     log = flat_log(buf)
     if log is None:
