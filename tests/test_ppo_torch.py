@@ -36,6 +36,9 @@ def test_quick_run_writes_its_files(tmp_path, capsys):
     assert succ and all(0.0 <= s <= 1.0 for s in succ)
     walls = [float(r["wall_time_s"]) for r in rows]
     assert walls == sorted(walls)
+    for r in rows:  # the host seconds in env.step and in the updates are parts of the wall time
+        assert 0 < float(r["env_time_s"]) and 0 < float(r["update_time_s"])
+        assert float(r["env_time_s"]) + float(r["update_time_s"]) < float(r["wall_time_s"])
     ev = res["eval"]
     assert 0.0 <= ev["success_rate"] <= 1.0 and ev["episodes"] == 8
     assert json.loads((out / "results.json").read_text())["eval"] == ev
@@ -229,6 +232,8 @@ def test_compare_quick_writes_report_and_plot_outside_docs(reports_untouched, ca
     for key in ("torch", "sb3"):
         [r] = results[key]
         assert r["steps"] >= 4096 and r["seconds"] > 0 and 0 <= r["eval"]["success_rate"] <= 1
+        assert 0 < r["env_seconds"] and 0 < r["update_seconds"] and r["env_seconds"] + r["update_seconds"] < r["seconds"]
+    assert "Where the wall time goes" in md
 
 
 def test_compare_quick_refuses_docs(capsys):

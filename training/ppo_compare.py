@@ -54,11 +54,28 @@ def run_sb3(cfg: dict, total: int, run_dir: Path, log=print) -> dict:
     check_hyperparameters("ppo", hyper)
     venv = make_train_env(cfg["env_id"], cfg["num_envs"], cfg["seed"])
     model = algo_class("ppo")("MlpPolicy", venv, seed=cfg["seed"], verbose=0, device="cpu", **hyper)
-    rows = []
+    rows, clock = [], {"env": 0.0, "update": 0.0, "update_start": None}
+    adapter = venv.venv  # PennySB3VecEnv under VecMonitor: time its step (the native env's step and the adapter)
+    step_wait = adapter.step_wait
+
+    def timed_step_wait():
+        t = time.perf_counter()
+        out = step_wait()
+        clock["env"] += time.perf_counter() - t
+        return out
+    adapter.step_wait = timed_step_wait
 
     class Curve(BaseCallback):
         def _on_training_start(self):
             self.t0 = time.perf_counter()
+
+        def _on_rollout_end(self):  # SB3's update (model.train) runs from here to the next rollout's start
+            clock["update_start"] = time.perf_counter()
+
+        def _update_done(self):
+            if clock["update_start"] is not None:
+                clock["update"] += time.perf_counter() - clock["update_start"]
+                clock["update_start"] = None
 
         def _row(self):
             m = self.model
@@ -70,6 +87,7 @@ def run_sb3(cfg: dict, total: int, run_dir: Path, log=print) -> dict:
                     f"{rows[-1][1]:.0f} s")
 
         def _on_rollout_start(self):  # the previous update is done: the row after it
+            self._update_done()
             if self.num_timesteps > 0:
                 self._row()
 
@@ -77,6 +95,7 @@ def run_sb3(cfg: dict, total: int, run_dir: Path, log=print) -> dict:
             return True
 
         def _on_training_end(self):
+            self._update_done()
             self._row()
 
     model.learn(total_timesteps=total, callback=Curve())
@@ -86,8 +105,8 @@ def run_sb3(cfg: dict, total: int, run_dir: Path, log=print) -> dict:
         w = csv.writer(f)
         w.writerow(["global_step", "wall_time_s", "success_rate", "mean_return", "episodes_in_window"])
         w.writerows(rows)
-    return {"rows": rows, "steps": rows[-1][0], "seconds": rows[-1][1],
-            "policy": lambda o: model.predict(o, deterministic=True)[0]}
+    return {"rows": rows, "steps": rows[-1][0], "seconds": rows[-1][1], "env_seconds": clock["env"],
+            "update_seconds": clock["update"], "policy": lambda o: model.predict(o, deterministic=True)[0]}
 
 
 def run_torch(cfg: dict, total: int, run_dir: Path, device: str, quick: bool, log=print) -> dict:
@@ -104,6 +123,7 @@ def run_torch(cfg: dict, total: int, run_dir: Path, device: str, quick: bool, lo
         with torch.no_grad():
             return agent.act(torch.as_tensor(obs)).numpy()
     return {"rows": rows, "steps": res["timesteps"], "seconds": res["train_seconds"], "policy": policy,
+            "env_seconds": res["env_seconds"], "update_seconds": res["update_seconds"],
             "device": res["device"], "own_eval": res["eval"]}
 
 
@@ -208,6 +228,20 @@ def report(results: dict, cfg: dict, total: int, argv, png: Path, quick: bool, s
                   f"and updates together; per seed pair {min(pairs):.2f} to {max(pairs):.2f}). Evaluation success, "
                   f"mean over seeds: {succ_t:.3f} (ppo_torch) and {succ_s:.3f} (SB3), ratio "
                   f"{succ_t / succ_s if succ_s > 0 else float('nan'):.2f}.", ""]
+    lines += ["Where the wall time goes (all seeds; host clock): `env.step` (for SB3 through its VecEnv adapter, "
+              "whose step includes the native env's), the rest of the rollouts (the policy's forward pass, the "
+              f"buffers, the bookkeeping) and the updates (advantages and {kw['n_epochs']} epochs of minibatch gradient "
+              "steps):", "",
+              "| implementation | env.step | rest of the rollouts | updates |", "| --- | ---: | ---: | ---: |"]
+    for key in ("torch", "sb3"):
+        runs = results[key]
+        total_s = sum(r["seconds"] for r in runs)
+        env_s = sum(r["env_seconds"] for r in runs)
+        upd_s = sum(r["update_seconds"] for r in runs)
+        rest = total_s - env_s - upd_s
+        lines.append(f"| {NAMES[key]} | {env_s:.1f} s ({100 * env_s / total_s:.0f} %) | {rest:.1f} s "
+                     f"({100 * rest / total_s:.0f} %) | {upd_s:.1f} s ({100 * upd_s / total_s:.0f} %) |")
+    lines.append("")
     own = [r.get("own_eval") for r in t]
     if all(own):
         lines += ["Cross-check: ppo_torch's own evaluation (`training.ppo_torch.evaluate`: the same seeds, its env made "
@@ -301,7 +335,8 @@ def main(argv=None):
                   f"{r['steps'] / r['seconds']:,.0f} steps/s; evaluation success {r['eval']['success_rate']:.3f} "
                   f"over {cfg['eval_episodes']} deterministic episodes", flush=True)
     (runs / "curves.json").write_text(json.dumps(
-        {k: [{kk: r[kk] for kk in ("seed", "rows", "steps", "seconds", "eval", "load")} for r in results[k]]
+        {k: [{kk: r[kk] for kk in ("seed", "rows", "steps", "seconds", "env_seconds", "update_seconds", "eval", "load")}
+             for r in results[k]]
          for k in results}, indent=1))
     png = out.with_suffix(".png")
     plot(results, png, cfg["env_id"], total)

@@ -25,7 +25,8 @@ observation from the info; both give the same transitions to learn from.
 
 Output folder (``--out``; default runs/ppo_torch/<env_id>_<seed>; --quick without --out: a new temporary
 directory): progress.csv (one row per update: global_step, wall_time_s, success_rate over the last
---success-window finished training episodes, mean_return over them, episodes, the losses, steps_per_s),
+--success-window finished training episodes, mean_return over them, episodes, the losses, steps_per_s, and
+the host seconds so far in env.step and in the updates),
 TensorBoard events (``tensorboard --logdir DIR``), model.pt (the agent's state_dict), config.json and
 results.json (the final deterministic evaluation on held-out seeds). The folder is printed at the end.
 """
@@ -255,7 +256,7 @@ def ppo_update(agent, optimizer, b_obs, b_actions, b_logprobs, b_advantages, b_r
 
 # -- training --------------------------------------------------------------------------------------
 CSV_COLUMNS = ["global_step", "wall_time_s", "success_rate", "mean_return", "episodes", "policy_loss", "value_loss",
-               "entropy", "approx_kl", "clipfrac", "steps_per_s"]
+               "entropy", "approx_kl", "clipfrac", "steps_per_s", "env_time_s", "update_time_s"]
 
 
 def default_out(args: Args) -> Path:
@@ -308,6 +309,7 @@ def train(args: Args, env=None, log=print, on_update=None):
     autoreset = torch.zeros(N, device=device)  # 1 where the env resets at the next step (NEXT_STEP mode)
     ep_ret = torch.zeros(N, device=device)
     global_step, iterations = 0, max(1, -(-args.total_timesteps // (N * T)))
+    env_time = update_time = 0.0  # host seconds in env.step and in the updates (GAE included)
     f = open(out / "progress.csv", "w", newline="")
     rows = csv.writer(f)
     rows.writerow(CSV_COLUMNS)
@@ -320,7 +322,9 @@ def train(args: Args, env=None, log=print, on_update=None):
             with torch.no_grad():
                 action, logprob, _, value = agent.get_action_and_value(next_obs)
             actions[step], logprobs[step], values[step] = action, logprob, value
+            t_env = time.perf_counter()
             next_obs, reward, term, trunc, info = env.step(env_actions(action, on_torch))
+            env_time += time.perf_counter() - t_env
             next_obs = to_tensor(next_obs, device)
             reward, term = to_tensor(reward, device), to_tensor(term, device)
             done = torch.maximum(term, to_tensor(trunc, device))
@@ -340,6 +344,7 @@ def train(args: Args, env=None, log=print, on_update=None):
             returns.extend(ep_return_at_end.cpu().numpy()[ended].tolist())
             episodes += int(ended.sum())
 
+        t_update = time.perf_counter()
         with torch.no_grad():
             next_value = agent.get_value(next_obs)
             advantages, returns_ = compute_gae(rewards, values, terminations, dones, valid, next_value,
@@ -349,12 +354,13 @@ def train(args: Args, env=None, log=print, on_update=None):
         b_actions = actions.reshape(-1, act_dim)[keep]
         stats = ppo_update(agent, optimizer, b_obs, b_actions, logprobs.reshape(-1)[keep],
                            advantages.reshape(-1)[keep], returns_.reshape(-1)[keep], args)
+        update_time += time.perf_counter() - t_update
 
         wall = time.perf_counter() - t0
         row = {"global_step": global_step, "wall_time_s": wall,
                "success_rate": float(np.mean(successes)) if successes else float("nan"),
                "mean_return": float(np.mean(returns)) if returns else float("nan"), "episodes": episodes,
-               **stats, "steps_per_s": global_step / wall}
+               **stats, "steps_per_s": global_step / wall, "env_time_s": env_time, "update_time_s": update_time}
         rows.writerow([row[c] for c in CSV_COLUMNS])
         f.flush()
         for key, value in row.items():
@@ -374,6 +380,7 @@ def train(args: Args, env=None, log=print, on_update=None):
 
     results = {"env_id": args.env_id, "timesteps": global_step, "train_seconds": train_seconds,
                "steps_per_s": global_step / train_seconds, "device": str(device),
+               "env_seconds": env_time, "update_seconds": update_time,
                "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
     # a stand-in env passed by a caller (tests) has no registered id to evaluate on
     results["eval"] = evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device) if made_env else None
