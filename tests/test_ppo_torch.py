@@ -3,6 +3,7 @@ training.ppo_compare, its comparison with SB3's PPO."""
 import csv
 import json
 import math
+import tempfile
 
 import numpy as np
 import pytest
@@ -223,8 +224,9 @@ def test_compare_quick_writes_report_and_plot_outside_docs(reports_untouched, ca
     from training import ppo_compare
     results = ppo_compare.main(["--quick"])
     printed = capsys.readouterr().out
-    report = next(line for line in printed.splitlines() if line.startswith("report: ")).split()[1].rstrip(";")
     from pathlib import Path
+    report = next(line for line in printed.splitlines() if line.startswith("wrote ") and line.endswith(".md"))[6:]
+    assert Path(tempfile.gettempdir()).resolve() in Path(report).resolve().parents
     md = Path(report).read_text()
     assert "- sources: sha256 " in md and "- command: `python -m training.ppo_compare --quick`" in md
     assert "Throughput ratio, training.ppo_torch / SB3" in md

@@ -13,10 +13,11 @@ start of training, success rate over its last 100 finished training episodes, th
 trained policies are then evaluated with deterministic actions on the same held-out seeds
 (training.episodes.run_episodes; seeds from training.runner.eval_seed(seed)).
 
-Writes the report (--out; default: a new temporary directory, as does every --quick run: --quick never
-writes into docs/), the plot beside it (<out stem>.png: success against wall-clock seconds and against env
+Writes the report (--out; default runs/reports/ppo_torch.md, --quick: a new temporary directory; --quick
+refuses an --out in docs/), the plot beside it (<out stem>.png: success against wall-clock seconds and against env
 steps, both implementations), and the runs (--runs, default runs/ppo_compare; --quick: a temporary
-directory): torch/ (ppo_torch's folder), sb3/ (model.zip, curve.csv) and curves.json.
+directory): torch_seed<S>/ (ppo_torch's folders), sb3_seed<S>/ (model.zip, curve.csv) and curves.json. Seeds:
+--seeds (default 0 1 2), the runs alternating (ppo_torch seed 0, SB3 seed 0, ppo_torch seed 1, ...).
 """
 from __future__ import annotations
 
@@ -283,8 +284,8 @@ def main(argv=None):
                                                     "SB3 runs on cpu")
     ap.add_argument("--config", default=None, help=f"the training config (default {CONFIG} of this checkout)")
     ap.add_argument("--runs", default=None, help="folder of the runs (default runs/ppo_compare; --quick: temporary)")
-    ap.add_argument("--out", default=None, help="the report (.md; the plot goes beside it as .png); "
-                                                "default: a temporary directory")
+    ap.add_argument("--out", default=None, help="the report (.md; the plot goes beside it as .png); default "
+                                                "runs/reports/ppo_torch.md (--quick: a temporary directory)")
     a = ap.parse_args(argv)
     try:
         from training.train import load_config
@@ -308,9 +309,14 @@ def main(argv=None):
     if a.quick:
         cfg = quick_config(cfg)
     t_start = time.perf_counter()
-    tmp = Path(tempfile.mkdtemp(prefix="penny_env-ppo-compare-")) if (a.quick or a.out is None) else None
-    out = Path(a.out).resolve() if a.out else tmp / "ppo_torch.md"
-    runs = Path(a.runs).resolve() if a.runs else (tmp / "runs" if a.quick else Path("runs/ppo_compare").resolve())
+    from penny_env.analysis.common import report_path
+    out = report_path(a.out, a.quick, "ppo_torch.md")
+    if a.runs:
+        runs = Path(a.runs).resolve()
+    elif a.quick:  # beside a quick report (a temporary directory unless --out) or in a new temporary directory
+        runs = (Path(tempfile.mkdtemp(prefix="penny_env-quick-")) if a.out else out.parent) / "runs"
+    else:
+        runs = Path("runs/ppo_compare").resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     runs.mkdir(parents=True, exist_ok=True)
     print(f"runs: {runs}; report: {out}", flush=True)
@@ -342,7 +348,7 @@ def main(argv=None):
     plot(results, png, cfg["env_id"], total)
     out.write_text(report(results, cfg, total, argv, png, a.quick, time.perf_counter() - t_start))
     print(out.read_text())
-    print(f"report: {out}; plot: {png}; runs: {runs}", flush=True)
+    print(f"wrote {out}\nwrote {png}\nruns: {runs}", flush=True)
     return results
 
 
