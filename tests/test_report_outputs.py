@@ -26,7 +26,8 @@ def test_report_path(reports_untouched):
 # the report commands whose --out has a default; the others (bench_solvers, stability, work_precision,
 # throughput) write nothing without --out
 DEFAULTED = [("penny_env.analysis.dynamics", "matplotlib"), ("penny_env.analysis.paper_figures", "matplotlib"),
-             ("penny_env.analysis.controllability", "matplotlib"), ("training.baselines", "stable_baselines3")]
+             ("penny_env.analysis.controllability", "matplotlib"), ("training.baselines", "stable_baselines3"),
+             ("training.ppo_compare", "stable_baselines3")]
 
 
 @pytest.mark.parametrize("module, needs", DEFAULTED)

@@ -79,6 +79,10 @@ REPORTS = {
     "docs/compile_time.md": ("python -m penny_env.analysis.compile_time --out docs/compile_time.md",
                              ("penny_env/analysis/compile_time.py", "penny_env/physics/compiled.py",
                               "penny_env/physics/parallel.py") + _ENV + _PHYSICS + _TABLES),
+    "docs/ppo_torch.md": ("python -m training.ppo_compare --out docs/ppo_torch.md",
+                          ("training/ppo_compare.py", "training/ppo_torch.py", "training/runner.py",
+                           "training/episodes.py", "configs/train/ppo_reach_ellipse.yaml", "penny_env/sb3.py",
+                           "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m penny_env.analysis.throughput_compare --before OLD --after NEW "
@@ -99,7 +103,8 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "penny_env.analysis.billiards": "docs/billiards.md",
                   "training.witness_study": "docs/witnesses.md",
                   "penny_env.analysis.contention": "docs/contention.md",
-                  "penny_env.analysis.compile_time": "docs/compile_time.md"}
+                  "penny_env.analysis.compile_time": "docs/compile_time.md",
+                  "training.ppo_compare": "docs/ppo_torch.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")

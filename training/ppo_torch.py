@@ -1,0 +1,478 @@
+"""A compact PPO in torch (CleanRL's ppo_continuous_action, one file) over penny_env's native vector env.
+
+    python -m training.ppo_torch [--env-id PennyReach-Ellipse-v0] [--num-envs 32] [--total-timesteps 1000000]
+                                 [--seed 0] [--device auto|cpu|cuda] [--quick] [--out DIR]
+
+The environment and the policy stay on one device: the vector env is
+``gymnasium.make_vec(env_id, num_envs, vectorization_mode="vector_entry_point")`` (PennyVectorEnv), whose
+outputs go through :func:`to_tensor` (numpy today: one ``torch.as_tensor`` per array; a backend whose
+outputs are torch tensors on the device passes them through without a copy) and whose actions are handed
+back in the env's own array type (:func:`env_actions`). ``--device auto`` is CUDA when torch sees a GPU.
+
+The hyperparameters default to those of configs/train/ppo_reach_ellipse.yaml and to SB3's PPO defaults
+(``--config`` reads such a training config): 32 envs x 128 steps per rollout, 10 epochs of minibatches of
+1024, Adam 3e-4 (eps 1e-5), gamma 0.99, GAE lambda 0.95, clip 0.2, no value clipping, entropy 0, value
+coefficient 0.5, gradient norm 0.5, advantages normalised per minibatch, separate 64-64 tanh MLPs for the
+actor mean and the critic with orthogonal initialisation, and a state-independent log-std starting at 0.
+
+Autoreset: the vector env runs in NEXT_STEP mode. The step that ends an episode returns the episode's last
+observation (the true next state: bootstrapping a truncated episode uses its value) and the *next* step
+resets that env, returning its reset observation with reward 0 and no termination: that step's transition
+(last obs, action, reset obs) is no transition of any episode. It is kept in the rollout buffer (fixed
+shapes, no host sync) but masked out: zero advantage, left out of every minibatch and of the episode
+statistics. SB3's adapter (penny_env/sb3.py) instead runs the env in SAME_STEP mode and reads the final
+observation from the info; both give the same transitions to learn from.
+
+Output folder (``--out``; default runs/ppo_torch/<env_id>_<seed>; --quick without --out: a new temporary
+directory): progress.csv (one row per update: global_step, wall_time_s, success_rate over the last
+--success-window finished training episodes, mean_return over them, episodes, the losses, steps_per_s, and
+the host seconds so far in env.step and in the updates),
+TensorBoard events (``tensorboard --logdir DIR``), model.pt (the agent's state_dict), config.json and
+results.json (the final deterministic evaluation on held-out seeds). The folder is printed at the end.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import tempfile
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn as nn
+from torch.distributions.normal import Normal
+
+DEVICES = ("auto", "cpu", "cuda")
+ROOT = Path(__file__).resolve().parents[1]  # the checkout (configs/ lives there)
+
+
+@dataclass
+class Args:
+    env_id: str = "PennyReach-Ellipse-v0"
+    num_envs: int = 32
+    total_timesteps: int = 1_000_000
+    seed: int = 0
+    device: str = "auto"  # auto: cuda if torch.cuda.is_available(), else cpu
+    env_backend: str | None = None  # passed to the vector env as backend= when given (e.g. "cuda")
+    num_steps: int = 128  # steps per env per rollout (SB3's n_steps)
+    minibatch_size: int = 1024  # SB3's batch_size
+    update_epochs: int = 10
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_coef: float = 0.2
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    norm_adv: bool = True
+    hidden: tuple = (64, 64)
+    log_std_init: float = 0.0
+    eval_episodes: int = 100
+    success_window: int = 100  # finished training episodes behind the success_rate column (SB3's 100)
+    torch_threads: int = 1
+    quick: bool = False
+    out: str | None = None
+
+
+def quick_args(args: Args) -> Args:
+    """--quick: a few thousand steps, seconds on a CPU (checks the pipeline, learns little)."""
+    return dataclasses.replace(args, total_timesteps=min(args.total_timesteps, 4096), num_steps=32,
+                               minibatch_size=256, update_epochs=2, eval_episodes=min(args.eval_episodes, 8))
+
+
+def args_from_config(cfg: dict, **changes) -> Args:
+    """Args from a training config (training.train.load_config's dict: SB3's PPO keys) plus changes."""
+    kw = cfg.get("algo_kwargs", {})
+    names = {"n_steps": "num_steps", "batch_size": "minibatch_size", "n_epochs": "update_epochs",
+             "learning_rate": "learning_rate", "gamma": "gamma", "gae_lambda": "gae_lambda", "clip_range": "clip_coef",
+             "ent_coef": "ent_coef", "vf_coef": "vf_coef", "max_grad_norm": "max_grad_norm",
+             "normalize_advantage": "norm_adv"}
+    unknown = sorted(set(kw) - set(names))
+    if unknown:
+        raise ValueError(f"algo_kwargs: {unknown} have no counterpart in training.ppo_torch; known: {sorted(names)}")
+    fields = {names[k]: v for k, v in kw.items()}
+    arch = cfg.get("policy_kwargs", {}).get("net_arch")
+    if arch is not None:
+        fields["hidden"] = tuple(arch)
+    for key in ("env_id", "num_envs", "total_timesteps", "seed", "eval_episodes"):
+        if key in cfg:
+            fields[key] = cfg[key]
+    return dataclasses.replace(Args(), **{**fields, **changes})
+
+
+def check_args(args: Args) -> None:
+    """ValueError naming the field of any invalid setting."""
+    def positive_int(name):
+        v = getattr(args, name)
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+
+    for name in ("num_envs", "total_timesteps", "num_steps", "minibatch_size", "update_epochs", "eval_episodes",
+                 "success_window", "torch_threads"):
+        positive_int(name)
+    if isinstance(args.seed, bool) or not isinstance(args.seed, (int, np.integer)) or args.seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {args.seed!r}")
+    if args.device not in DEVICES:
+        raise ValueError(f"device must be one of {DEVICES}, got {args.device!r}")
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device 'cuda' asked for, but torch.cuda.is_available() is False (use --device cpu or auto)")
+    for name in ("learning_rate", "clip_coef", "max_grad_norm"):
+        if not getattr(args, name) > 0:
+            raise ValueError(f"{name} must be positive, got {getattr(args, name)!r}")
+    for name in ("gamma", "gae_lambda"):
+        if not 0 <= getattr(args, name) <= 1:
+            raise ValueError(f"{name} must be in [0, 1], got {getattr(args, name)!r}")
+    if not args.hidden or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in args.hidden):
+        raise ValueError(f"hidden must be a list of positive layer widths, got {args.hidden!r}")
+    import gymnasium as gym
+    import penny_env  # noqa: F401  (registers the ids)
+    from penny_env.envs.registration import env_ids
+    if args.env_id not in gym.registry or args.env_id not in env_ids():
+        raise ValueError(f"env_id {args.env_id!r} is not a registered penny_env id; known: {env_ids()}")
+
+
+def resolve_device(name: str) -> torch.device:
+    return torch.device("cuda" if name == "auto" and torch.cuda.is_available() else "cpu" if name == "auto" else name)
+
+
+# -- the env <-> torch boundary ----------------------------------------------------------------
+def env_outputs_torch(env) -> bool:
+    """Whether the vector env's outputs (and the actions it takes) are torch tensors on the device.
+    A backend that keeps its state on the GPU says so with ``array_namespace == "torch"`` on the
+    unwrapped env; the numpy backends (no such attribute) take and give numpy arrays."""
+    return getattr(env.unwrapped, "array_namespace", "numpy") == "torch"
+
+
+def to_tensor(x, device, dtype=torch.float32) -> torch.Tensor:
+    """x as a tensor on `device`: a tensor already there (and of that dtype) passes through without a copy,
+    numpy arrays go through torch.as_tensor."""
+    if torch.is_tensor(x):
+        return x.to(device=device, dtype=dtype)
+    return torch.as_tensor(np.asarray(x), dtype=dtype, device=device)
+
+
+def env_actions(actions: torch.Tensor, on_torch: bool):
+    """The actions in the env's own array type: the tensor itself, or a float32 numpy array."""
+    return actions if on_torch else actions.detach().cpu().numpy()
+
+
+def make_env(args: Args, num_envs: int | None = None):
+    import gymnasium as gym
+    import penny_env  # noqa: F401
+    kwargs = {} if args.env_backend is None else {"backend": args.env_backend}
+    return gym.make_vec(args.env_id, num_envs=num_envs or args.num_envs, vectorization_mode="vector_entry_point",
+                        **kwargs)
+
+
+# -- the agent ---------------------------------------------------------------------------------
+def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
+    torch.nn.init.orthogonal_(layer.weight, std)
+    torch.nn.init.constant_(layer.bias, bias_const)
+    return layer
+
+
+def mlp(n_in, hidden, n_out, out_std):
+    layers, k = [], n_in
+    for h in hidden:
+        layers += [layer_init(nn.Linear(k, h)), nn.Tanh()]
+        k = h
+    return nn.Sequential(*layers, layer_init(nn.Linear(k, n_out), std=out_std))
+
+
+class Agent(nn.Module):
+    def __init__(self, obs_dim: int, act_dim: int, hidden=(64, 64), log_std_init: float = 0.0):
+        super().__init__()
+        self.critic = mlp(obs_dim, hidden, 1, out_std=1.0)
+        self.actor_mean = mlp(obs_dim, hidden, act_dim, out_std=0.01)
+        self.actor_logstd = nn.Parameter(torch.full((1, act_dim), float(log_std_init)))
+
+    def get_value(self, x):
+        return self.critic(x).squeeze(-1)
+
+    def get_action_and_value(self, x, action=None):
+        mean = self.actor_mean(x)
+        probs = Normal(mean, self.actor_logstd.expand_as(mean).exp())
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(-1), probs.entropy().sum(-1), self.get_value(x)
+
+    def act(self, x):
+        """Deterministic actions (the mean), clipped to the action box."""
+        return self.actor_mean(x).clamp(-1.0, 1.0)
+
+
+# -- advantages ----------------------------------------------------------------------------------
+def compute_gae(rewards, values, terminations, dones, valid, next_value, gamma, gae_lambda):
+    """GAE over a NEXT_STEP rollout; all inputs (T, N) tensors (bools as float), next_value (N,).
+
+    values[t + 1] is the value of the observation step t returned: after an episode's last step that is
+    its last observation (bootstrapped unless terminated); the step after it (valid 0) is the env's reset,
+    whose advantage is 0. Returns (advantages, returns)."""
+    T = rewards.shape[0]
+    advantages = torch.zeros_like(rewards)
+    lastgaelam = torch.zeros_like(next_value)
+    for t in reversed(range(T)):
+        nextvalues = next_value if t == T - 1 else values[t + 1]
+        delta = rewards[t] + gamma * nextvalues * (1.0 - terminations[t]) - values[t]
+        lastgaelam = (delta + gamma * gae_lambda * (1.0 - dones[t]) * lastgaelam) * valid[t]
+        advantages[t] = lastgaelam
+    return advantages, advantages + values
+
+
+def ppo_update(agent, optimizer, b_obs, b_actions, b_logprobs, b_advantages, b_returns, args: Args, generator=None):
+    """Epochs of clipped-objective minibatch updates on the (valid) transitions; returns the last losses."""
+    n = b_obs.shape[0]
+    stats = {}
+    for _ in range(args.update_epochs):
+        perm = torch.randperm(n, device=b_obs.device, generator=generator)
+        for start in range(0, n, args.minibatch_size):
+            mb = perm[start:start + args.minibatch_size]
+            _, newlogprob, entropy, newvalue = agent.get_action_and_value(b_obs[mb], b_actions[mb])
+            logratio = newlogprob - b_logprobs[mb]
+            ratio = logratio.exp()
+            with torch.no_grad():
+                approx_kl = ((ratio - 1) - logratio).mean()
+                clipfrac = ((ratio - 1.0).abs() > args.clip_coef).float().mean()
+            mb_adv = b_advantages[mb]
+            if args.norm_adv and len(mb) > 1:
+                mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
+            pg_loss = torch.max(-mb_adv * ratio, -mb_adv * ratio.clamp(1 - args.clip_coef, 1 + args.clip_coef)).mean()
+            v_loss = ((newvalue - b_returns[mb]) ** 2).mean()  # SB3's MSE (CleanRL halves it)
+            entropy_loss = entropy.mean()
+            loss = pg_loss - args.ent_coef * entropy_loss + args.vf_coef * v_loss
+            optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            optimizer.step()
+            stats = {"policy_loss": pg_loss, "value_loss": v_loss, "entropy": entropy_loss,
+                     "approx_kl": approx_kl, "clipfrac": clipfrac}
+    return {k: float(v.detach()) for k, v in stats.items()}
+
+
+# -- training --------------------------------------------------------------------------------------
+CSV_COLUMNS = ["global_step", "wall_time_s", "success_rate", "mean_return", "episodes", "policy_loss", "value_loss",
+               "entropy", "approx_kl", "clipfrac", "steps_per_s", "env_time_s", "update_time_s"]
+
+
+def default_out(args: Args) -> Path:
+    if args.out:
+        return Path(args.out)
+    if args.quick:  # a quick run checks the pipeline: it never writes over a real run
+        return Path(tempfile.mkdtemp(prefix="penny_env-ppo-quick-"))
+    return Path("runs") / "ppo_torch" / f"{args.env_id}_{args.seed}"
+
+
+def train(args: Args, env=None, log=print, on_update=None):
+    """Train into args.out (see the module docstring); returns (agent, results dict).
+    env: a vector env to use instead of make_env(args) (tests); on_update(row): called after each update."""
+    if args.quick:
+        args = quick_args(args)
+    made_env = env is None
+    if made_env:
+        check_args(args)
+    out = default_out(args).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(args.torch_threads)
+    device = resolve_device(args.device)
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    env = make_env(args) if env is None else env
+    on_torch = env_outputs_torch(env)
+    N, T = env.num_envs, args.num_steps
+    obs_dim = env.single_observation_space.shape[0]
+    act_dim = env.single_action_space.shape[0]
+    agent = Agent(obs_dim, act_dim, args.hidden, args.log_std_init).to(device)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+    (out / "config.json").write_text(json.dumps({**dataclasses.asdict(args), "out": str(out),
+                                                 "device_used": str(device)}, indent=2))
+    from torch.utils.tensorboard import SummaryWriter
+    writer = SummaryWriter(str(out))
+
+    # rollout storage, on the device
+    shape = (T, N)
+    obs = torch.zeros(shape + (obs_dim,), device=device)
+    actions = torch.zeros(shape + (act_dim,), device=device)
+    logprobs, rewards, values = (torch.zeros(shape, device=device) for _ in range(3))
+    terminations, dones, valid = (torch.zeros(shape, device=device) for _ in range(3))
+    ep_ends, ep_success, ep_return_at_end = (torch.zeros(shape, device=device) for _ in range(3))
+    successes, returns = deque(maxlen=args.success_window), deque(maxlen=args.success_window)
+    episodes = 0
+
+    t0 = time.perf_counter()
+    next_obs, _ = env.reset(seed=args.seed)
+    next_obs = to_tensor(next_obs, device)
+    autoreset = torch.zeros(N, device=device)  # 1 where the env resets at the next step (NEXT_STEP mode)
+    ep_ret = torch.zeros(N, device=device)
+    global_step, iterations = 0, max(1, -(-args.total_timesteps // (N * T)))
+    env_time = update_time = 0.0  # host seconds in env.step and in the updates (GAE included)
+    f = open(out / "progress.csv", "w", newline="")
+    rows = csv.writer(f)
+    rows.writerow(CSV_COLUMNS)
+    row = None
+    for iteration in range(1, iterations + 1):
+        for step in range(T):
+            global_step += N
+            obs[step] = next_obs
+            valid[step] = 1.0 - autoreset
+            with torch.no_grad():
+                action, logprob, _, value = agent.get_action_and_value(next_obs)
+            actions[step], logprobs[step], values[step] = action, logprob, value
+            t_env = time.perf_counter()
+            next_obs, reward, term, trunc, info = env.step(env_actions(action, on_torch))
+            env_time += time.perf_counter() - t_env
+            next_obs = to_tensor(next_obs, device)
+            reward, term = to_tensor(reward, device), to_tensor(term, device)
+            done = torch.maximum(term, to_tensor(trunc, device))
+            rewards[step], terminations[step], dones[step] = reward, term, done
+            # episode statistics of the valid steps (a reset step has reward 0 and is never done)
+            ep_ret += reward
+            ep_ends[step] = done * valid[step]
+            ep_success[step] = to_tensor(info["is_success"], device) * done
+            ep_return_at_end[step] = ep_ret
+            ep_ret = ep_ret * (1.0 - done)
+            autoreset = done
+
+        # one host sync per rollout for the episode statistics
+        ended = ep_ends.bool().cpu().numpy()
+        if ended.any():
+            successes.extend(ep_success.cpu().numpy()[ended].tolist())
+            returns.extend(ep_return_at_end.cpu().numpy()[ended].tolist())
+            episodes += int(ended.sum())
+
+        t_update = time.perf_counter()
+        with torch.no_grad():
+            next_value = agent.get_value(next_obs)
+            advantages, returns_ = compute_gae(rewards, values, terminations, dones, valid, next_value,
+                                               args.gamma, args.gae_lambda)
+        keep = valid.reshape(-1).bool()  # the reset steps of NEXT_STEP autoreset are no transitions
+        b_obs = obs.reshape(-1, obs_dim)[keep]
+        b_actions = actions.reshape(-1, act_dim)[keep]
+        stats = ppo_update(agent, optimizer, b_obs, b_actions, logprobs.reshape(-1)[keep],
+                           advantages.reshape(-1)[keep], returns_.reshape(-1)[keep], args)
+        update_time += time.perf_counter() - t_update
+
+        wall = time.perf_counter() - t0
+        row = {"global_step": global_step, "wall_time_s": wall,
+               "success_rate": float(np.mean(successes)) if successes else float("nan"),
+               "mean_return": float(np.mean(returns)) if returns else float("nan"), "episodes": episodes,
+               **stats, "steps_per_s": global_step / wall, "env_time_s": env_time, "update_time_s": update_time}
+        rows.writerow([row[c] for c in CSV_COLUMNS])
+        f.flush()
+        for key, value in row.items():
+            if key not in ("global_step", "wall_time_s"):
+                writer.add_scalar(("losses/" if key in stats else "charts/") + key, value, global_step)
+        if on_update is not None:
+            on_update(row)
+        if log is not None and (iteration % 10 == 0 or iteration == iterations):
+            log(f"[ppo_torch] {global_step:,}/{iterations * N * T:,} steps, {row['steps_per_s']:,.0f} steps/s, "
+                f"success {row['success_rate']:.2f} over the last {len(successes)} episodes, "
+                f"return {row['mean_return']:.2f}, {wall:.0f} s")
+    f.close()
+    train_seconds = time.perf_counter() - t0
+    env.close()
+    torch.save(agent.state_dict(), out / "model.pt")
+    writer.close()
+
+    results = {"env_id": args.env_id, "timesteps": global_step, "train_seconds": train_seconds,
+               "steps_per_s": global_step / train_seconds, "device": str(device),
+               "env_seconds": env_time, "update_seconds": update_time,
+               "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
+    # a stand-in env passed by a caller (tests) has no registered id to evaluate on
+    results["eval"] = evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device) if made_env else None
+    (out / "results.json").write_text(json.dumps(results, indent=2))
+    if log is not None:
+        ev = results.get("eval")
+        if ev:
+            log(f"[ppo_torch] evaluation: success {ev['success_rate']:.3f} over {ev['episodes']} deterministic "
+                f"episodes (seeds from {ev['seed']}), mean return {ev['mean_return']:.2f}")
+        log(f"[ppo_torch] {global_step:,} steps in {train_seconds:.1f} s ({results['steps_per_s']:,.0f} steps/s "
+            f"on {device}); output folder: {out} (tensorboard --logdir {out})")
+    return agent, results
+
+
+def eval_seed(seed: int) -> int:
+    """First seed of the evaluation episodes (training.runner's: disjoint from the training seeds)."""
+    return 1_000_000 + 10_000 * int(seed)
+
+
+def evaluate(agent, args: Args, episodes: int, seed: int, device=None) -> dict:
+    """One deterministic episode in each of `episodes` sub-envs seeded seed, seed + 1, ...: success rate
+    (info["is_success"] at the episode's end) and mean return."""
+    device = next(agent.parameters()).device if device is None else device
+    env = make_env(args, episodes)
+    on_torch = env_outputs_torch(env)
+    obs, _ = env.reset(seed=seed)
+    alive = torch.ones(episodes, dtype=torch.bool, device=device)
+    success = torch.zeros(episodes, device=device)
+    ret = torch.zeros(episodes, device=device)
+    while bool(alive.any()):
+        with torch.no_grad():
+            action = agent.act(to_tensor(obs, device))
+        obs, reward, term, trunc, info = env.step(env_actions(action, on_torch))
+        ret += to_tensor(reward, device) * alive
+        ended = alive & (to_tensor(term, device, torch.bool) | to_tensor(trunc, device, torch.bool))
+        success = torch.where(ended, to_tensor(info["is_success"], device), success)
+        alive &= ~ended
+    env.close()
+    return {"success_rate": float(success.mean()), "mean_return": float(ret.mean()), "episodes": episodes,
+            "seed": seed}
+
+
+def load_agent(run_dir, device="cpu") -> Agent:
+    """The trained agent of a run folder (config.json + model.pt)."""
+    run_dir = Path(run_dir)
+    cfg = json.loads((run_dir / "config.json").read_text())
+    state = torch.load(run_dir / "model.pt", map_location=device)
+    obs_dim = state["critic.0.weight"].shape[1]
+    act_dim = state["actor_logstd"].shape[1]
+    agent = Agent(obs_dim, act_dim, tuple(cfg["hidden"]))
+    agent.load_state_dict(state)
+    return agent.to(device)
+
+
+def parse_args(argv=None) -> Args:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    d = Args()
+    ap.add_argument("--config", default=None, help="a training config (YAML, e.g. configs/train/ppo_reach_ellipse.yaml) "
+                                                   "whose env, budget and SB3 PPO hyperparameters to use")
+    ap.add_argument("--env-id", default=None, help=f"a registered penny_env id (default {d.env_id})")
+    ap.add_argument("--num-envs", type=int, default=None, help=f"envs of the vector env (default {d.num_envs})")
+    ap.add_argument("--total-timesteps", type=int, default=None, help=f"env steps (default {d.total_timesteps:,})")
+    ap.add_argument("--seed", type=int, default=None, help="seed of the envs (env i: seed + i) and of torch (default 0)")
+    ap.add_argument("--device", default="auto", help="auto (cuda if torch.cuda.is_available()), cpu or cuda")
+    ap.add_argument("--env-backend", default=None, help="the vector env's backend= (default: the env's own)")
+    ap.add_argument("--num-steps", type=int, default=None, help=f"steps per env per rollout (default {d.num_steps})")
+    ap.add_argument("--eval-episodes", type=int, default=None, help=f"final evaluation (default {d.eval_episodes})")
+    ap.add_argument("--torch-threads", type=int, default=1, help="torch.set_num_threads (default 1)")
+    ap.add_argument("--quick", action="store_true", help="a few thousand steps (< 60 s on a CPU): checks the pipeline")
+    ap.add_argument("--out", default=None, help="output folder (default runs/ppo_torch/<env_id>_<seed>; "
+                                                "--quick: a new temporary directory)")
+    a = ap.parse_args(argv)
+    try:
+        if a.config:
+            from training.train import load_config
+            args = args_from_config(load_config(a.config))
+        else:
+            args = Args()
+        changes = {"env_id": a.env_id, "num_envs": a.num_envs, "total_timesteps": a.total_timesteps, "seed": a.seed,
+                   "num_steps": a.num_steps, "eval_episodes": a.eval_episodes}
+        args = dataclasses.replace(args, device=a.device, env_backend=a.env_backend, torch_threads=a.torch_threads,
+                                   quick=a.quick, out=a.out, **{k: v for k, v in changes.items() if v is not None})
+        check_args(quick_args(args) if args.quick else args)
+    except ValueError as exc:
+        ap.error(str(exc))
+    return args
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    return train(args)
+
+
+if __name__ == "__main__":
+    main()
