@@ -144,16 +144,17 @@ class Solution:
         return self.status == "optimal"
 
 
-def solve_rows(prob, K, x0=None, maxiter=200):
+def solve_rows(prob, K, x0=None, maxiter=200, max_rows=MAX_ROWS):
     """Minimum effort over K rows into the terminal set, SLSQP with exact gradients: single shooting
     (prob.segment_rows None) or multiple shooting with segments of prob.segment_rows rows
-    (training/shooting.py); verified by simulating the torques again from the start, in one piece."""
+    (training/shooting.py); verified by simulating the torques again from the start, in one piece.
+    max_rows: the longest horizon accepted (training/impact_oc.py solves longer single-input ones)."""
     from scipy.optimize import minimize
 
     if isinstance(K, bool) or not isinstance(K, (int, np.integer)):
         raise TypeError(f"rows must be an int, got {type(K).__name__}")
-    if not 1 <= K <= MAX_ROWS:
-        raise ValueError(f"rows (the control count) must be in [1, {MAX_ROWS}], got {K}")
+    if not 1 <= K <= max_rows:
+        raise ValueError(f"rows (the control count) must be in [1, {max_rows}], got {K}")
     t0 = time.perf_counter()
     R = prob.params.R
     active = prob.limits > 0
