@@ -514,9 +514,15 @@ def plot_examples(rows, path, n=4):
                 q = sol.traj.impact_states
                 ax.plot(q[:, 0], q[:, 1], "rx", ms=7)
         s = r["start"]
-        ax.annotate("", xy=(s[0] + 0.03 * math.cos(s[3]), s[1] + 0.03 * math.sin(s[3])), xytext=(s[0], s[1]),
+        ax.annotate("", xy=(s[0] + 0.01 * math.cos(s[3]), s[1] + 0.01 * math.sin(s[3])), xytext=(s[0], s[1]),
                     arrowprops=dict(arrowstyle="->", color="g"))
-        ax.plot(*r["target"], "o", mfc="none", mec="k", ms=8, label="target")
+        tol = Problem(r["scene"], r["task"], r["start"], r["target"], impacts=True).tolerance
+        ax.plot(*r["target"], "k+", ms=6, label="target (tolerance circle)")
+        ax.add_patch(plt.Circle(tuple(r["target"]), tol, fill=False, ec="k", lw=0.8))
+        pts = np.vstack([np.vstack([ln.get_xydata() for ln in ax.lines[1:]]), [r["target"]]])
+        c, half = (pts.max(0) + pts.min(0)) / 2, (pts.max(0) - pts.min(0)).max() / 2 + 0.02  # zoom on the plans
+        ax.set_xlim(c[0] - half, c[0] + half)
+        ax.set_ylim(c[1] - half, c[1] + half)
         ax.set_aspect("equal")
         ax.set_title(f"{r['scene']} #{r['pair']}: {LABEL[r['actuation']]}, min {ob}", fontsize=9)
         ax.legend(fontsize=7, loc="lower left")
@@ -582,8 +588,10 @@ def write_report(rows, out, argv, seconds, meta):
                      f"{s['pays_only_with']} | {gap} | {s['without_better']} | {s['from_witness']} |")
     if has_png:
         lines += ["", f"![where impacts pay]({png.name})", "",
-                  "Pairs where impacts pay: the best plan found with impacts (solid, impacts x) and without "
-                  "(dashed, where one was found); start arrow green, target circled."]
+                  "Pairs where impacts pay (the first of each actuation): the contact point's path of the best plan "
+                  "found with impacts (solid; x: the contact point at each impact, the penny's edge touching the "
+                  "wall 1 cm beyond) and without (dashed, where one was found); the start's heading arrow green, "
+                  "the target's tolerance circle black."]
     lines += ["", "## Every pair", "",
               "Times in s, effort as mean (u / limit)^2; the start the best plan with impacts came from; failures "
               "with their reasons.", "",
@@ -593,7 +601,7 @@ def write_report(rows, out, argv, seconds, meta):
         ob = r["objective"]
 
         def show(sol):
-            return f"{value(sol, ob):.3g}" if sol.ok else sol.status.replace("|", "/")
+            return f"{value(sol, ob):.3g}" if sol.ok else sol.status.replace("|", "\\|")
         wit = (f"{r['witness']['steps']} steps, {r['witness']['impacts']} impacts" if r["witness"]["certified"]
                else r["witness"]["reason"].replace("|", "/"))
         lines.append(f"| {r['scene']} | {r['pair']} | {r['actuation']} | {ob} | {r['horizon']} | {wit} | "
