@@ -457,6 +457,23 @@ def summarise(rows, margin=MARGIN):
     return out
 
 
+def notes(rows) -> list[str]:
+    """Where no plan was found: the starting rolling speeds of those pairs against all pairs' (computed)."""
+    out = []
+    for act in ACTUATIONS:
+        sel = [r for r in rows if r["actuation"] == act and r["objective"] == "time"]
+        bad = [r for r in sel if not r["with"].ok and not r["without"].ok]
+        if sel and bad:
+            v = [0.01 * abs(r["start"][4]) for r in bad]  # R = 0.01 m
+            allv = [0.01 * abs(r["start"][4]) for r in sel]
+            out.append(f"{LABEL[act].capitalize()}, minimum time: no plan found in {len(bad)} of {len(sel)} pairs, "
+                       f"starting at {min(v):.3f}-{max(v):.3f} m/s (all pairs: {min(allv):.3f}-{max(allv):.3f} m/s); "
+                       "the witness family found no impact sequence that left the penny slow at the target (its "
+                       "closest approach is in the every-pair table), and the solver's zero and random starts found nothing either (not a proof of "
+                       "infeasibility)." if act == "steer" else "")
+    return [x for x in out if x]
+
+
 LABEL = {"both": "both controls, park", "steer": "steer only, park", "drive": "drive only, reach"}
 
 
@@ -568,12 +585,15 @@ def write_report(rows, out, argv, seconds, meta):
         "every plan found without; the shares are lower bounds of the shares in the problem distribution only in "
         "so far as the impact-free searches found the impact-free optima. Steer only: without impacts the task is "
         "infeasible by theorem T2 (theta_dot is conserved), so every feasible plan there uses impacts.", "",
+        *notes(rows), "",
         "## Per actuation and table", "",
         "Pairs; feasible without / with impacts (a verified plan found); with impacts certified by the witness's "
         "episode; neither; best plan with impacts that hits the wall; impacts pay (share, 95 % exact "
         "Clopper-Pearson interval); of those, pairs feasible both ways and pairs feasible only with impacts; mean "
         "relative gain where both were feasible and impacts pay; pairs where the plan without impacts is the "
-        "better by the margin; best plan with impacts that came from the witness's start.", "",
+        "better by the margin; best plan with impacts that came from the witness's start. For minimum effort the "
+        "witness certifies the task within its own episode, which is often longer than the effort horizon, not "
+        "within that horizon.", "",
         "| actuation | objective | table | pairs | feasible without | feasible with | witnessed | neither | "
         "with hits the wall | impacts pay [95 % CI] | pay, both feasible | pay, only with | mean gain | "
         "without better | best from witness |",
