@@ -631,6 +631,13 @@ def write_report(rows, out, argv, seconds, meta):
               "- A plan with the impact count fixed per mode (multiple shooting with one segment per impact-free "
               "arc and the impact as a switching constraint) is not built: the multi-start above reaches different "
               "impact sequences only through its starts.",
+              "- The impact-free search is not seeded from the witness. A witness episode without impacts (the "
+              "both-controls feedback witness hit the wall in "
+              f"{sum(r['witness']['impacts'] > 0 for r in rows if r['actuation'] == 'both' and r['objective'] == 'time')}"
+              f" of its {sum(r['actuation'] == 'both' and r['objective'] == 'time' for r in rows)} episodes here) is an "
+              f"impact-free candidate if it keeps the margin: {sum(1 for r in rows if not r['without'].ok and r['witness']['certified'] and r['witness']['impacts'] == 0 and r['objective'] == 'time')} "
+              "minimum-time row(s) have no impact-free plan found although the witness's episode had no impact; "
+              "they count as paying only where the plan with impacts hits the wall.",
               "- Laws other than elastic (the probes' plastic and e = 0.5 walls) and the circle and rounded "
               "rectangle tables are not run here."]
     out.write_text("\n".join(lines) + "\n")
