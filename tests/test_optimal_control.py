@@ -195,3 +195,137 @@ def test_agent_summary_pairs_episodes_with_optima():
     # ratios against the allowed optimum: 4, 4, 0.8, 1 -> median 2.5; one episode faster than the optimum
     assert r["ratio_median"] == pytest.approx(2.5) and (r["rl_faster"], r["compared"]) == (1, 4)
     assert r["impact_share"] == pytest.approx(0.25)
+
+
+# -- issue 20.5: optimal control where impacts can pay (training/impact_oc.py) ------------------------------
+def _cfg(**kw):
+    from training import impact_oc as io
+    cfg = {"seed": 0, "horizon": dict(io.HORIZON, both=30), "maxiter": 60, "random_starts": 0, "budget": 4,
+           "witness": False, "objectives": ("time",), "keep_traj": True}
+    cfg.update(kw)
+    return cfg
+
+
+def test_a_bounce_off_the_wall_beats_braking():
+    """Rolling at 0.15 m/s towards the wall 4 cm ahead, target 5 cm behind: bouncing back off the (elastic)
+    wall is faster than braking and reversing, and the search must find that plan: fewer rows, an impact."""
+    from training import impact_oc as io
+    start, target = np.array([0.10, 0.0, 0.0, 0.0, 15.0, 0.0]), np.array([0.05, 0.0])
+    [row] = io.solve_pair(("ellipse", 0, start, target, "both", _cfg()))
+    w, wo = row["with"], row["without"]
+    assert w.ok and wo.ok, (w.status, wo.status)
+    assert wo.impacts == 0 and w.impacts >= 1
+    assert w.rows < wo.rows and io.pays(row), (w.rows, wo.rows)
+
+
+def test_steer_only_without_impacts_is_infeasible_by_t2_not_solved():
+    from training import impact_oc as io
+    start, target = np.array([0.10, 0.0, 0.0, 0.0, 10.0, 0.0]), np.array([0.0, 0.1])
+    [row] = io.solve_pair(("ellipse", 0, start, target, "steer", _cfg(horizon=dict(io.HORIZON, steer=4),
+                                                                        maxiter=3)))
+    assert row["without"].status.startswith("infeasible (T2)") and row["without_source"] == "theorem T2"
+    assert not row["with"].ok and not io.pays(row)  # 4 rows cannot park: failed, reported, never dropped
+    s = io.summarise([row])[0]
+    assert (s["pairs"], s["feasible_with"], s["feasible_without"], s["neither"], s["pays"]) == (1, 0, 0, 1, 0)
+
+
+def test_replay_is_verified_and_cut_at_the_first_success():
+    from training import impact_oc as io
+    prob = oc.Problem("ellipse", "park", START, [0.0, 0.0], impacts=False)
+    sol = io.replay(prob, np.zeros((5, 2)))
+    assert sol.ok and sol.rows == 1  # parked on the target from the first row
+    far = io.replay(oc.Problem("ellipse", "park", START, [0.0, 0.1], impacts=True), np.zeros((5, 2)))
+    assert not far.ok and far.status.startswith("failed: replay ends 0.1 m")
+    # rolling at the wall, target behind: zero torques bounce back through it; with impacts forbidden that
+    # replay is not a solution
+    fast = np.array([0.10, 0.0, 0.0, 0.0, 15.0, 0.0])
+    bounce = io.replay(oc.Problem("ellipse", "reach", fast, [0.05, 0.0], impacts=True), np.zeros((25, 2)))
+    assert bounce.ok and bounce.impacts == 1 and bounce.rows < 25
+    hit = io.replay(oc.Problem("ellipse", "reach", fast, [0.05, 0.0], impacts=False), np.zeros((25, 2)))
+    assert not hit.ok and "hits the wall" in hit.status
+
+
+def test_pays_needs_a_wall_hit_and_the_margin():
+    from training import impact_oc as io
+
+    def sol(rows, impacts, ok=True):
+        return oc.Solution("optimal" if ok else "failed: x", rows, 0.1, np.zeros((rows, 2)), impacts, 0.0, 0.05, 0.0)
+
+    def row(w, wo):
+        return {"objective": "time", "with": w, "without": wo}
+    assert io.pays(row(sol(10, 1), sol(20, 0)))
+    assert not io.pays(row(sol(10, 0), sol(20, 0)))          # better, but without touching the wall
+    assert not io.pays(row(sol(20, 1), sol(20, 0)))          # no gain
+    assert not io.pays(row(sol(39, 1), sol(40, 0)))          # 2.5 %: within the 5 % margin
+    assert io.pays(row(sol(39, 1), sol(0, 0, ok=False)))     # only feasible with the impact
+    assert not io.pays(row(sol(0, 0, ok=False), sol(0, 0, ok=False)))
+    rows = [dict(row(sol(10, 1), sol(20, 0)), scene="ellipse", actuation="drive", witness={"certified": True},
+                 with_source="witness") for _ in range(3)]
+    rows.append(dict(row(sol(20, 0), sol(20, 0)), scene="stadium", actuation="drive", witness={"certified": False},
+                     with_source="zero"))
+    pooled = [s for s in io.summarise(rows) if s["scene"] == "all"][0]
+    from training.study_report import clopper_pearson
+    assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (4, 3, 3, 3)
+    assert pooled["ci"] == clopper_pearson(3, 4) and pooled["mean_gap"] == pytest.approx(0.5)
+    assert "impacts pay in 3 of 4 pairs" in io.answer([pooled])[0]
+
+
+def test_impact_pairs_start_fast_near_the_wall_with_targets_near_it():
+    from training import impact_oc as io
+    for scene in io.SCENES:
+        table = oc.scene_table(scene)
+        for s, t in io.draw_pairs(scene, 20, seed=3):
+            speed = 0.01 * abs(s[4])
+            assert io.SPEED[0] <= speed <= io.SPEED[1]
+            ray = np.hypot(*s[:2])
+            assert io.START_GAP[0] - 1e-12 <= float(table.wall_distance(*(s[:2] / ray))) - ray <= io.START_GAP[1] + 1e-12
+            g = np.asarray(table.grad(*s[:2]), float)  # heading at the wall: moving outwards
+            assert np.cos(s[3]) * g[0] + np.sin(s[3]) * g[1] > 0
+            r = np.hypot(*t)
+            assert io.TARGET_GAP[0] - 1e-12 <= float(table.wall_distance(*(t / r))) - r <= io.TARGET_GAP[1] + 1e-12
+    a, b = io.draw_pairs("ellipse", 3, seed=1), io.draw_pairs("ellipse", 3, seed=1)
+    assert all(np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) for x, y in zip(a, b))
+
+
+def test_impact_study_bad_input_names_the_field():
+    from training import impact_oc as io
+    with pytest.raises(ValueError, match="scene"):
+        io.draw_pairs("moon", 2, seed=0)
+    with pytest.raises(ValueError, match="pairs"):
+        io.draw_pairs("ellipse", 0, seed=0)
+    with pytest.raises(ValueError, match="actuation"):
+        io.study(1, actuations=("fly",))
+    with pytest.raises(ValueError, match="pairs"):
+        io.study(0)
+    with pytest.raises(SystemExit, match="--actuations"):
+        io.main(["--quick", "--actuations", "fly"])
+    with pytest.raises(SystemExit, match="table"):
+        io.main(["--quick", "--scenes", "moon"])
+    with pytest.raises(SystemExit, match="--pairs"):
+        io.main(["--pairs", "0"])
+
+
+def test_impact_quick_run_writes_outside_docs(tmp_path):
+    """--quick: one ellipse pair, every actuation, witnesses included, in well under a minute; the saved rows
+    rewrite the same report (--report-only); never into docs/."""
+    import subprocess
+    import sys
+    import time
+    from training import impact_oc as io
+    root = oc.Path(io.__file__).resolve().parents[1]
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "training.impact_oc", "--quick", "--out", str(tmp_path / "oc.md")],
+                   cwd=root, check=True, capture_output=True, timeout=120)
+    assert time.perf_counter() - t0 < 60
+    text = (tmp_path / "oc.md").read_text()
+    for act in ("both controls, park", "steer only, park", "drive only, reach"):
+        assert f"| {act} | time | all | 1 |" in text
+    assert "- sources: sha256" in text and "Clopper-Pearson" in text and (tmp_path / "rows.pkl").is_file()
+    # the steer pair: infeasible without impacts by T2, feasible with them (the witness certifies it)
+    assert "| steer only, park | time | all | 1 | 0 | 1 | 1 | 0 | 1 | 1/1" in text
+    again = io.main(["--quick", "--report-only", "--out", str(tmp_path / "oc.md")]).read_text()
+    assert again.split("## Answer")[1] == text.split("## Answer")[1]
+    with pytest.raises(SystemExit, match="never writes into docs"):
+        io.main(["--quick", "--out", str(root / "docs" / "x.md")])
+    with pytest.raises(SystemExit, match="no saved solves"):
+        io.main(["--quick", "--report-only", "--out", str(tmp_path / "empty" / "oc.md")])

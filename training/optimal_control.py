@@ -1,10 +1,12 @@
 """Does the optimal penny need impacts? Trajectory optimisation with exact derivatives through impacts.
 
     python -m training.optimal_control [--quick] [--pairs 50] [--single-input-pairs 10] [--cross-check-pairs 10]
-                                       [--workers 16] [--out docs/optimal_control.md] [--runs runs/optimal_control]
+                                       [--workers 16] [--out docs/optimal_control_central.md] [--runs runs/optimal_control]
                                        [--study-runs runs/study] [--report-only | --cross-check-only]
 
-For start/target pairs drawn as the environments draw them (penny_env/presets: the paper's ellipse and
+The central study (docs/optimal_control_central.md): slow starts and central targets, where impacts gave
+no gain; training/impact_oc.py (docs/optimal_control.md) reuses these problems and solvers on pairs where
+impacts can pay. For start/target pairs drawn as the environments draw them (penny_env/presets: the paper's ellipse and
 the stadium, reach and park tasks), each problem is solved twice:
 
 * **impacts allowed**: the real table; the final state and its derivatives come from
@@ -144,16 +146,17 @@ class Solution:
         return self.status == "optimal"
 
 
-def solve_rows(prob, K, x0=None, maxiter=200):
+def solve_rows(prob, K, x0=None, maxiter=200, max_rows=MAX_ROWS):
     """Minimum effort over K rows into the terminal set, SLSQP with exact gradients: single shooting
     (prob.segment_rows None) or multiple shooting with segments of prob.segment_rows rows
-    (training/shooting.py); verified by simulating the torques again from the start, in one piece."""
+    (training/shooting.py); verified by simulating the torques again from the start, in one piece.
+    max_rows: the longest horizon accepted (training/impact_oc.py solves longer single-input ones)."""
     from scipy.optimize import minimize
 
     if isinstance(K, bool) or not isinstance(K, (int, np.integer)):
         raise TypeError(f"rows must be an int, got {type(K).__name__}")
-    if not 1 <= K <= MAX_ROWS:
-        raise ValueError(f"rows (the control count) must be in [1, {MAX_ROWS}], got {K}")
+    if not 1 <= K <= max_rows:
+        raise ValueError(f"rows (the control count) must be in [1, {max_rows}], got {K}")
     t0 = time.perf_counter()
     R = prob.params.R
     active = prob.limits > 0
@@ -481,7 +484,8 @@ def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None
     has_png = plot_examples(rows, png)
     from penny_env.analysis.common import machine_lines
 
-    lines = ["# Does the optimal penny need impacts?", "", *machine_lines(),
+    lines = ["# Does the optimal penny need impacts? (the central study: slow starts, central targets)", "",
+             *machine_lines(),
              "- commands: " + ", then ".join(f"`{c}`" for c in commands) +
              f" (from the repository root); the solves took {seconds:.0f} s in all", "",
              "Method: see the docstring of `training/optimal_control.py` (single shooting over the control rows, "
@@ -543,7 +547,7 @@ def main(argv=None):
                     help="pairs for the steer-only and drive-only minimum-time problems (default 10)")
     ap.add_argument("--cross-check-pairs", type=int, default=10,
                     help="pairs whose minimum-effort problems are solved again by multiple shooting (default 10)")
-    ap.add_argument("--out", type=Path, default=None, help="report path (default docs/optimal_control.md; "
+    ap.add_argument("--out", type=Path, default=None, help="report path (default docs/optimal_control_central.md; "
                                                               "--quick: a temporary folder)")
     ap.add_argument("--runs", type=Path, default=None,
                     help="where the solved pairs are saved (rows.pkl; default runs/optimal_control, --quick: beside "
@@ -569,7 +573,7 @@ def main(argv=None):
         scenes, tasks, objectives, n_pairs, checked = ("ellipse",), ("reach",), ("effort",), 2, 1
         cmd = "python -m training.optimal_control --quick"
     else:
-        out = args.out or docs / "optimal_control.md"
+        out = args.out or docs / "optimal_control_central.md"
         scenes, tasks, objectives, n_pairs, checked = SCENES, TASKS, OBJECTIVES, args.pairs, args.cross_check_pairs
         cmd = (f"python -m training.optimal_control --pairs {args.pairs} --single-input-pairs "
                f"{args.single_input_pairs} --cross-check-pairs {args.cross_check_pairs} --seed {args.seed}")

@@ -13,7 +13,7 @@ compare it with the current sources and name the command that regenerates each s
 
 ``--stamp REPORT --reason TEXT`` records the current hash in a report **without** rerunning it, with
 the date and the reason in the line itself, for reports whose command takes hours (docs/study.md,
-docs/optimal_control.md) after one has checked that the changes do not reach its numbers. The
+docs/optimal_control_central.md) after one has checked that the changes do not reach its numbers. The
 reason stays visible in the report.
 """
 from __future__ import annotations
@@ -63,9 +63,15 @@ REPORTS = {
     "docs/study.md": ("python -m training.study --config configs/study/large.yaml",
                       ("training/study.py", "training/study_report.py", "configs/study/large.yaml") + _ENV + _PHYSICS
                       + _TABLES),
-    "docs/optimal_control.md": ("python -m training.optimal_control --workers 2",
-                                ("training/optimal_control.py", "training/shooting.py", "training/optimal_vs_rl.py",
-                                 "penny_env/physics/sensitivity.py") + _PHYSICS + _TABLES),
+    "docs/optimal_control.md": ("python -m training.impact_oc --pairs 12 --workers 1",
+                                ("training/impact_oc.py", "training/optimal_control.py", "training/shooting.py",
+                                 "training/witness.py", "training/policies.py", "penny_env/physics/sensitivity.py",
+                                 "penny_env/envs/vector_env.py", "penny_env/envs/penny_env.py") + _ENV + _PHYSICS
+                                + _TABLES),
+    "docs/optimal_control_central.md": ("python -m training.optimal_control --workers 2",
+                                        ("training/optimal_control.py", "training/shooting.py",
+                                         "training/optimal_vs_rl.py", "penny_env/physics/sensitivity.py")
+                                        + _PHYSICS + _TABLES),
     "docs/billiards.md": ("python -m penny_env.analysis.billiards --out docs/billiards.md",
                           ("penny_env/analysis/billiards.py", "penny_env/analysis/boundary_map.py", "penny_env/batch.py",
                            "penny_env/physics/sensitivity.py", "penny_env/physics/compiled.py") + _PHYSICS + _TABLES),
@@ -98,7 +104,8 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "penny_env.analysis.dynamics": "docs/dynamics.md",
                   "penny_env.analysis.controllability": "docs/controllability.md",
                   "training.study": "docs/study.md",
-                  "training.optimal_control": "docs/optimal_control.md",
+                  "training.optimal_control": "docs/optimal_control_central.md",
+                  "training.impact_oc": "docs/optimal_control.md",
                   "penny_env.analysis.throughput_compare": "docs/throughput_compare.md",
                   "penny_env.analysis.billiards": "docs/billiards.md",
                   "training.witness_study": "docs/witnesses.md",
