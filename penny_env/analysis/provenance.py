@@ -31,7 +31,7 @@ _PHYSICS = ("penny_env/physics/scalar.py", "penny_env/physics/flows.py", "penny_
             "penny_env/physics/laws.py", "penny_env/physics/params.py", "penny_env/physics/simulation.py")
 _TABLES = ("penny_env/physics/tables/base.py", "penny_env/physics/tables/ellipse.py",
            "penny_env/physics/tables/stadium.py", "penny_env/physics/tables/rounded_rectangle.py")
-_ENV = ("penny_env/envs/functional.py", "penny_env/envs/core.py", "penny_env/envs/tasks.py",
+_ENV = ("penny_env/physics/builder.py", "penny_env/envs/functional.py", "penny_env/envs/core.py", "penny_env/envs/tasks.py",
         "penny_env/envs/scene.py", "penny_env/presets/envs.yaml", "penny_env/presets/scenes/ellipse.yaml",
         "penny_env/presets/scenes/circle.yaml", "penny_env/presets/scenes/stadium.yaml",
         "penny_env/presets/scenes/plane.yaml", "penny_env/presets/scenes/rounded_rectangle.yaml")
@@ -54,12 +54,12 @@ REPORTS = {
     "docs/baselines.md": ("python -m training.baselines --out docs/baselines.md",
                           ("training/baselines.py",) + _ENV + _PHYSICS + _TABLES),
     "docs/paper_figures.md": ("python -m penny_env.analysis.paper_figures --out docs/paper_figures.md",
-                              ("penny_env/analysis/paper_figures.py", "penny_env/batch.py") + _PHYSICS + _TABLES),
+                              ("penny_env/analysis/paper_figures.py", "penny_env/batch.py", "penny_env/physics/compiled.py", "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
     "docs/dynamics.md": ("python -m penny_env.analysis.dynamics --out docs/dynamics.md",
-                         ("penny_env/analysis/dynamics.py", "penny_env/batch.py") + _PHYSICS + _TABLES),
+                         ("penny_env/analysis/dynamics.py", "penny_env/batch.py", "penny_env/physics/compiled.py", "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
     "docs/controllability.md": ("python -m penny_env.analysis.controllability --out docs/controllability.md",
                                 ("penny_env/analysis/controllability.py", "penny_env/analysis/dynamics.py",
-                                 "penny_env/batch.py") + _PHYSICS + _TABLES),
+                                 "penny_env/batch.py", "penny_env/physics/compiled.py", "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
     "docs/study.md": ("python -m training.study --config configs/study/large.yaml",
                       ("training/study.py", "training/study_report.py", "configs/study/large.yaml") + _ENV + _PHYSICS
                       + _TABLES),
@@ -74,7 +74,8 @@ REPORTS = {
                                         + _PHYSICS + _TABLES),
     "docs/billiards.md": ("python -m penny_env.analysis.billiards --out docs/billiards.md",
                           ("penny_env/analysis/billiards.py", "penny_env/analysis/boundary_map.py", "penny_env/batch.py",
-                           "penny_env/physics/sensitivity.py", "penny_env/physics/compiled.py") + _PHYSICS + _TABLES),
+                           "penny_env/physics/sensitivity.py", "penny_env/physics/compiled.py",
+                           "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
     "docs/witnesses.md": ("python -m training.witness_study --workers 2",
                           ("training/witness.py", "training/witness_study.py", "training/verdict.py",
                            "training/policies.py", "penny_env/analysis/controllability_theorems.py",
