@@ -544,9 +544,10 @@ def main(argv=None):
         rows += r
         curves += c
     sources = None
-    if out == (DOCS / "fair_rl.md").resolve():
-        from penny_env.analysis.provenance import stamp_line
-        sources = stamp_line("docs/fair_rl.md")
+    from penny_env.analysis.provenance import REPORTS, stamp_line
+    rel = out.relative_to(ROOT).as_posix() if out.is_relative_to(ROOT) else None
+    if rel in REPORTS:  # a committed report (docs/fair_rl.md, docs/fair_rl_extra/*): its sources' hash
+        sources = stamp_line(rel)
     meta = {"command": command_line("training.fair_rl", list(sys.argv[1:] if argv is None else argv)),
             "machine": machine_lines(), "wall_s": time.perf_counter() - t0,
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "sources": sources, "config": cfg,

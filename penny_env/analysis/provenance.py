@@ -76,6 +76,11 @@ REPORTS = {
     "docs/fair_rl.md": ("python -m training.fair_rl --out docs/fair_rl.md",
                         ("training/fair_rl.py", "training/witness.py", "training/witness_study.py") + _ENV + _PHYSICS
                         + _TABLES),
+    # steer-only park on two more tables, run beside docs/fair_rl.md with the same budget
+    **{f"docs/fair_rl_extra/{t}/fair_rl.md": (
+        f"python -m training.fair_rl --cells Steer:{t}:elastic --out docs/fair_rl_extra/{t}/fair_rl.md",
+        ("training/fair_rl.py", "training/witness.py", "training/witness_study.py") + _ENV + _PHYSICS + _TABLES)
+       for t in ("circle", "rounded_rectangle")},
     "docs/contention.md": ("python -m penny_env.analysis.contention --out docs/contention.md",
                            ("penny_env/analysis/contention.py", "penny_env/physics/parallel.py",
                             "penny_env/physics/compiled.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
