@@ -80,6 +80,14 @@ REPORTS = {
                           ("training/witness.py", "training/witness_study.py", "training/verdict.py",
                            "training/policies.py", "penny_env/analysis/controllability_theorems.py",
                            "penny_env/envs/vector_env.py", "penny_env/envs/penny_env.py") + _ENV + _PHYSICS + _TABLES),
+    "docs/fair_rl.md": ("python -m training.fair_rl --out docs/fair_rl.md",
+                        ("training/fair_rl.py", "training/witness.py", "training/witness_study.py") + _ENV + _PHYSICS
+                        + _TABLES),
+    # steer-only park on two more tables, run beside docs/fair_rl.md with the same budget
+    **{f"docs/fair_rl_extra/{t}/fair_rl.md": (
+        f"python -m training.fair_rl --cells Steer:{t}:elastic --out docs/fair_rl_extra/{t}/fair_rl.md",
+        ("training/fair_rl.py", "training/witness.py", "training/witness_study.py") + _ENV + _PHYSICS + _TABLES)
+       for t in ("circle", "rounded_rectangle")},
     "docs/contention.md": ("python -m penny_env.analysis.contention --out docs/contention.md",
                            ("penny_env/analysis/contention.py", "penny_env/physics/parallel.py",
                             "penny_env/physics/compiled.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
@@ -110,6 +118,7 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "penny_env.analysis.throughput_compare": "docs/throughput_compare.md",
                   "penny_env.analysis.billiards": "docs/billiards.md",
                   "training.witness_study": "docs/witnesses.md",
+                  "training.fair_rl": "docs/fair_rl.md",
                   "penny_env.analysis.contention": "docs/contention.md",
                   "penny_env.analysis.compile_time": "docs/compile_time.md",
                   "training.ppo_compare": "docs/ppo_torch.md"}
