@@ -124,8 +124,11 @@ def test_compiled_step_truncates_a_capped_period_as_the_plain_step_does():
         outs = []
         for f, model in ((fns[0], capped), (fns[1], capped), (fns[1], m)):
             obs, buf = np.zeros((1, 11), np.float32), scalar.impact_buffers(1, 64)
-            new, *rest = f(st, 0.2, 0.9, functional.pack(p, model, core.k), obs, tuple(buf))
-            outs.append((functional.PennyState(*new), tuple(rest), obs, buf))
+            out = f(st, 0.2, 0.9, functional.pack(p, model, core.k), obs, tuple(buf))
+            s1, trig1, count, dist, steps, time = out[:6]
+            new = functional.PennyState(s1, trig1, st[2], st[3], count, dist, steps, time)
+            assert out[6] == buf.count[0]
+            outs.append((new, tuple(out[7:]), obs, buf))
         (a, ra, obs_a, buf_a), (b, rb, obs_b, buf_b), (free, rf, _, buf_f) = outs
         assert np.array_equal(_bits(a.s), _bits(b.s)) and a[1:] == b[1:] and ra == rb
         assert np.array_equal(obs_a, obs_b) and all(np.array_equal(x, y) for x, y in zip(buf_a, buf_b))

@@ -172,6 +172,17 @@ class StepResults(NamedTuple):
     limit: object
 
 
+def _check_positions():
+    """step_env and observe_row take the arrays they write by position: the records' fields must stay in
+    this order."""
+    assert EnvState._fields == ("S", "trig", "target", "arc", "count", "dist", "steps", "time")
+    assert StepResults._fields == ("obs", "reward", "terminated", "truncated", "kinetic_energy", "limit")
+    assert ImpactBuffers._fields == ("count", "time", "end", "post", "rest", "arc_count")  # (also scalar.clear_row)
+
+
+_check_positions()
+
+
 def arc_window(st, p, k):
     """The marked arc of scalar.record_impact for the state st: the task's arc (the impacts task), the
     whole wall when its half-width is pi, none otherwise (nothing to count)."""
@@ -238,32 +249,50 @@ def step_env(i, st, actions, skip, p, m, k, out, buf):
     the step's results; the info's impact times are NaN-padded, its ends 0-padded, past the count).
     A skipped env (it resets at this step, NEXT_STEP autoreset) keeps its state and gets a zero reward,
     no flags and no impacts; its obs and kinetic-energy rows are left for the caller (it resets them)."""
+    # The arrays this body writes are taken from the records by position, one statement each (fields
+    # checked by _check_positions): inlined into numba's parallel loop, a write through an array reached
+    # by a NamedTuple attribute is lost (numba issues 7135 and 10338), and so is one through an array
+    # unpacked from a tuple of four or more; reads by name, and writes in called functions, are fine.
+    S = st[0]
+    trig = st[1]
+    count = st[4]
+    dist = st[5]
+    steps = st[6]
+    time = st[7]
+    obs = out[0]
+    reward = out[1]
+    terminated = out[2]
+    truncated = out[3]
+    energy = out[4]
+    limit = out[5]
+    times = buf[1]
+    ends = buf[2]
     clear_row(buf, i)
     if skip[i]:
-        out.reward[i] = 0.0
-        out.terminated[i] = False
-        out.truncated[i] = False
-        out.limit[i] = LIMIT_NONE
+        reward[i] = 0.0
+        terminated[i] = False
+        truncated[i] = False
+        limit[i] = LIMIT_NONE
     else:
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
         new, o, r, te, tu, e, lim = env_step(env_row(st, i), actions[i, 0], a1, p, m, k, buf, i)
-        write_row(out.obs, i, o)
+        write_row(obs, i, o)
         for row in range(6):
-            st.S[row, i] = new.s[row]
+            S[row, i] = new.s[row]
         for row in range(4):
-            st.trig[row, i] = new.trig[row]
-        st.count[i] = new.count
-        st.dist[i] = new.dist
-        st.steps[i] = new.steps
-        st.time[i] = new.time
-        out.reward[i] = r
-        out.terminated[i] = te
-        out.truncated[i] = tu
-        out.kinetic_energy[i] = e
-        out.limit[i] = lim
-    for j in range(buf.count[i], buf.time.shape[1]):
-        buf.time[i, j] = np.nan
-        buf.end[i, j] = 0
+            trig[row, i] = new.trig[row]
+        count[i] = new.count
+        dist[i] = new.dist
+        steps[i] = new.steps
+        time[i] = new.time
+        reward[i] = r
+        terminated[i] = te
+        truncated[i] = tu
+        energy[i] = e
+        limit[i] = lim
+    for j in range(buf.count[i], times.shape[1]):
+        times[i, j] = np.nan
+        ends[i, j] = 0
 
 
 def step_envs(st, actions, skip, p, m, k, out, buf):
@@ -274,10 +303,11 @@ def step_envs(st, actions, skip, p, m, k, out, buf):
 def observe_row(j, rows, st, p, obs):
     """trig and obs of env rows[j] (after its reset)."""
     i = rows[j]
+    trig = st[1]  # (by position, as in step_env: written in a parallel loop)
     s = (st.S[0, i], st.S[1, i], st.S[2, i], st.S[3, i], st.S[4, i], st.S[5, i])
     tr = angle_trig(s)
     for row in range(4):
-        st.trig[row, i] = tr[row]
+        trig[row, i] = tr[row]
     write_row(obs, i, observe(s, tr, st.target[0, i], st.target[1, i], st.count[i], p))
 
 
@@ -298,12 +328,14 @@ def pack(p, m, k):
 def env_step_packed(st, a0, a1, consts, obs, buf):
     """env_step with st a plain tuple of PennyState's fields, consts = pack(p, m, k) and buf a plain tuple
     of ImpactBuffers' arrays (one row) (PennyEnv's entry point): the observation goes into row 0 of obs
-    (1, obs_dim); returns (new state as a plain tuple, reward, terminated, truncated, kinetic energy, limit)."""
+    (1, obs_dim); returns (the new state's fields that a step changes: s, trig, count, dist, steps, time;
+    then the impact count, reward, terminated, truncated, kinetic energy, limit), flat (fewer objects for
+    numba to box: the single env's whole step costs a few microseconds)."""
     pt, mt, kt = consts
-    new, o, r, te, tu, e, lim = env_step(PennyState(*st), a0, a1, EnvParams(*pt), Model(*mt), TaskConstants(*kt),
-                                         ImpactBuffers(*buf), 0)
+    b = ImpactBuffers(*buf)
+    new, o, r, te, tu, e, lim = env_step(PennyState(*st), a0, a1, EnvParams(*pt), Model(*mt), TaskConstants(*kt), b, 0)
     write_row(obs, 0, o)
-    return (new.s, new.trig, new.target, new.arc, new.count, new.dist, new.steps, new.time), r, te, tu, e, lim
+    return new.s, new.trig, new.count, new.dist, new.steps, new.time, b.count[0], r, te, tu, e, lim
 
 
 def step_envs_packed(st, actions, skip, consts, out, buf):
@@ -369,9 +401,10 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
     b.namespace["XP"] = b.math
     for name in ("run_interval", "clear_row"):
         b.namespace[name] = phys.namespace[name]
-    b.copies((tasks.step_reward, clip_action, observe, angle_trig, kinetic_energy, arc_window, env_row))
-    # inlined: a call that passes arrays increments and decrements their reference counts, atomically
-    b.copies((write_row,), inline=True)
+    b.copies((tasks.step_reward, clip_action, observe, angle_trig, kinetic_energy))
+    # inlined: a call that passes arrays increments and decrements their reference counts, atomically (and
+    # arc_window's records of constants would be copied into every call)
+    b.copies((write_row, env_row, arc_window), inline=True)
     b.copy(initial_observation)
     if target == "cuda":
         b.copies((env_step, step_env, observe_row))
@@ -381,9 +414,9 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
         single = b.copy(env_step_packed)
         # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
         b.copy(env_step, inline=True)
-        # the loops' bodies as plain calls: numba-inlined into a prange loop, a body's writes through a record's
-        # arrays are lost (numba 0.68; tests/test_parallel.py checks the parallel loop against the serial one)
-        b.copies((step_env, observe_row))
+        # inlined into the parallel loop: called there as a function, its many arguments cost more than its
+        # work (they write by position, see step_env; tests/test_parallel.py checks parallel against serial)
+        b.copies((step_env, observe_row), inline=True)
         fns = {"env_step": single,
                # one parallel call at a time (parallel.locked), serially for few envs or in a forked child
                "step_envs": b.loop(step_envs, entry=step_envs_packed, count=_vector_count)}

@@ -203,11 +203,12 @@ class PennyEnv(gym.Env):
         tuple of them the compiled step takes."""
         self._buf = impact_buffers(1, capacity)
         self._buf_args = tuple(self._buf)
+        self._capacity = capacity
 
     def __getstate__(self):
         state = self.__dict__.copy()
         state["_renderer"] = None
-        for key in ("_core", "_fns", "_p", "_m", "_consts", "_buf", "_buf_args"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_buf", "_buf_args", "_capacity"):
             state.pop(key)
         return state
 
@@ -272,12 +273,11 @@ class PennyEnv(gym.Env):
         st = (self._s, self._trig, self._target, self._arc, self._count, self._d, self._steps, self._t)
         self._in_step = True  # cleared once the step's results are all stored (see step's docstring)
         out = self._fns["env_step"](st, a[0], a1, self._consts, obs, self._buf_args)
-        n_imp = int(self._buf.count[0])
-        if n_imp > self._buf.time.shape[1]:  # more impacts than the buffer holds: the same pure step, a larger buffer
+        n_imp = out[6]
+        if n_imp > self._capacity:  # more impacts than the buffer holds: the same pure step, a larger buffer
             self._buffers(n_imp)
             out = self._fns["env_step"](st, a[0], a1, self._consts, obs, self._buf_args)
-        new, reward, terminated, truncated, energy, limit = out
-        s, self._trig, _, _, self._count, d, self._steps, t = new
+        s, self._trig, self._count, d, self._steps, t, n_imp, reward, terminated, truncated, energy, limit = out
         t_prev = self._t
         self._s = s
         self._d = d

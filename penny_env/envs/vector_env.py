@@ -144,11 +144,13 @@ class PennyVectorEnv(VectorEnv):
         self._renderers = None
         self._true = np.ones(n, dtype=bool)
         self._in_step = False
+        self._scratch = None  # the step's post-impact states and rest flags (reused)
 
     def __getstate__(self):
         state = self.__dict__.copy()
         for key in ("_core", "_fns", "_p", "_m", "_consts", "_gpu"):
             state.pop(key)
+        state["_scratch"] = None
         if self._gpu is not None and self._S is not None:  # the device's state travels as host arrays
             for name, attr in (("S", "_S"), ("trig", "_trig"), ("target", "_target"), ("arc", "_arc"), ("count", "_count"),
                                ("dist", "_d"), ("steps", "_steps"), ("time", "_t")):
@@ -349,11 +351,16 @@ class PennyVectorEnv(VectorEnv):
         trunc = np.empty(n, dtype=bool)
         energy = np.empty(n)
         limit = np.empty(n, dtype=np.int8)
-        buf = impact_buffers(n, K, empty=True)  # the info's impact_times / impact_ends are its slots
+        # the info's impact counts, times and ends are the buffers' (new arrays each step); the post-impact
+        # states and rest flags, which the info does not return, are reused from step to step
+        if self._scratch is None or self._scratch[0].shape != (n, K, 6):
+            self._scratch = (np.empty((n, K, 6)), np.empty((n, K), dtype=np.int8))
+        buf = (np.empty(n, dtype=np.int64), np.empty((n, K)), np.empty((n, K), dtype=np.int8), *self._scratch,
+               np.empty(n, dtype=np.int64))  # (scalar.ImpactBuffers' fields; step_env clears every row)
         # from here to the autoreset flags the step's bookkeeping must run whole (class docstring)
         self._in_step = True
-        self._fns["step_envs"](self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), tuple(buf))
-        n_imp, times, ends = buf.count, buf.time, buf.end
+        self._fns["step_envs"](self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), buf)
+        n_imp, times, ends = buf[0], buf[1], buf[2]
         self._extend_trails()
         done = term | trunc
         if next_step and skip.any():  # the envs whose episode ended at the previous step reset now

@@ -133,21 +133,23 @@ def source_digest(modules) -> str:
 
 def drop_stale_cache(folder, modules) -> None:
     """Tidy-up only (correctness comes from :func:`source_digest` in the copies' names): delete the
-    machine code cached in ``folder`` (a package __pycache__) when any of ``modules`` changed since it
-    was written, so that edits do not pile up old files there. Other cache locations keep old files,
-    which are never loaded (their names carry the old digest)."""
-    import hashlib
-
+    machine code cached in ``folder`` (a package __pycache__) by earlier versions of ``modules``, so that
+    edits do not pile up old files there. Only files whose names lack the current digest go: processes
+    that start together after an edit (pytest-xdist workers, a pool of env workers) compile and load the
+    current files side by side, and none deletes what another has just written (a segmentation fault
+    was seen once while loading after such concurrent deletions; its cause is not pinned down). Other
+    cache locations keep old files, which are never loaded (their names carry the old digest)."""
     folder = Path(folder)
-    digest = hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in modules)).hexdigest()
+    current = source_digest(modules)
     stamp = folder / "penny_env_numba.stamp"
     try:
-        if stamp.exists() and stamp.read_text() == digest:
+        if stamp.exists() and stamp.read_text() == current:
             return
         for f in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
-            f.unlink(missing_ok=True)
+            if current not in f.name:
+                f.unlink(missing_ok=True)
         folder.mkdir(exist_ok=True)
-        stamp.write_text(digest)
+        stamp.write_text(current)
     except OSError:  # read-only install: numba caches elsewhere (or not at all)
         pass
 
@@ -353,6 +355,10 @@ def _physics_build(target, kind):
                if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
     sources.append(flows.phase_sweep)
     b.copies(sources)
+    # inlined where they are called: every penny's step runs them, and a call that passes the buffers
+    # increments and decrements the reference counts of their six arrays (atomically: the threads of a
+    # parallel loop contend for them)
+    b.copies((scalar.run_interval, scalar.clear_row), inline=True)
 
     def formula(f):  # penny_env's run in the physics namespace; a user's in its own globals
         if f.__module__.startswith("penny_env."):
@@ -380,10 +386,10 @@ def _physics_build(target, kind):
     functions = {f.__name__: b.namespace[f.__name__] for f in sources}
     functions.update(advance_into=b.namespace["advance_into"], advance_through_into=b.namespace["advance_through_into"])
     # the per-penny bodies and their loops (parallel over pennies on the CPU, a kernel on CUDA)
-    # (the loops' bodies are not numba-inlined: an inlined body's writes through a record's arrays are
-    # lost in a prange loop, numba 0.68; LLVM inlines the call anyway)
-    b.copies((angle_trig_into,), inline=True)
-    b.copies((advance_penny, first_impact_penny))
+    # inlined into the loops (the records they pass on are written in called functions only: numba's
+    # parallel loops lose writes through a NamedTuple's attribute made in the loop body itself, see
+    # envs/functional.step_env)
+    b.copies((angle_trig_into, advance_penny, first_impact_penny), inline=True)
     for loop in (advance_batch, first_impact_batch):  # called under parallel.PARALLEL_LOCK on the CPU
         functions[loop.__name__] = b.loop(loop)
     b.functions = functions

@@ -419,9 +419,12 @@ def overflowed(buf):
 
 
 def clear_row(buf, row):
-    """Row ``row`` of buf emptied (count and arc count 0) before a call writes into it."""
-    buf.count[row] = 0
-    buf.arc_count[row] = 0
+    """Row ``row`` of buf emptied (count and arc count 0) before a call writes into it. (By position: it
+    is inlined into parallel loops, where numba loses writes made through a NamedTuple's attribute.)"""
+    count = buf[0]
+    arc_count = buf[5]
+    count[row] = 0
+    arc_count[row] = 0
 
 
 def record_impact(buf, row, t, end, post, rest, arc, m):
