@@ -69,7 +69,8 @@ def _ptx_toolchain():
 @pytest.mark.parametrize("kind", KINDS)
 def test_every_kernel_compiles_to_ptx(kind, cc, device_stand_in):
     if not _ptx_toolchain():
-        pytest.skip("numba-cuda cannot compile PTX here (the NVRTC wheel, nvidia-cuda-nvrtc-cu12, is missing)")
+        pytest.skip("numba-cuda cannot compile PTX here: it needs libNVVM (a CUDA toolkit, as /usr/local/cuda on the "
+                    "project's machine, or the nvidia-cuda-nvcc wheel) and NVRTC (nvidia-cuda-nvrtc-cu12)")
     from penny_env.analysis.cuda_ptx import compile_kernels
     from penny_env.physics.laws import COMPILED_LAWS
     device_stand_in(cc)
