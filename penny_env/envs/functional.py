@@ -267,6 +267,9 @@ def step_env(i, st, actions, skip, p, m, k, out, buf):
     limit = out[5]
     times = buf[1]
     ends = buf[2]
+    for j in range(times.shape[1]):  # (padding first, over the whole row: a loop with fixed bounds is cheaper)
+        times[i, j] = np.nan
+        ends[i, j] = 0
     clear_row(buf, i)
     if skip[i]:
         reward[i] = 0.0
@@ -290,9 +293,6 @@ def step_env(i, st, actions, skip, p, m, k, out, buf):
         truncated[i] = tu
         energy[i] = e
         limit[i] = lim
-    for j in range(buf.count[i], times.shape[1]):
-        times[i, j] = np.nan
-        ends[i, j] = 0
 
 
 def step_envs(st, actions, skip, p, m, k, out, buf):
