@@ -203,15 +203,3 @@ def loop_parts(loop) -> tuple[str, str]:
     if not ok:
         raise ValueError(f"{loop.__name__}: a loop over pennies must be 'for i in prange(COUNT): BODY(i, <its arguments>)'")
     return call.func.id, ast.unparse(stmts[0].iter.args[0])
-
-
-def as_device_arrays(obj):
-    """Objects with __cuda_array_interface__ (torch tensors, CuPy arrays) as numba device arrays, zero-copy,
-    through tuples and NamedTuples (the kernels' records); other values unchanged."""
-    from numba import cuda
-    if hasattr(obj, "__cuda_array_interface__") and not isinstance(obj, np.ndarray):
-        return cuda.as_cuda_array(obj)
-    if isinstance(obj, tuple):
-        items = [as_device_arrays(v) for v in obj]
-        return type(obj)(*items) if hasattr(obj, "_fields") else tuple(items)
-    return obj
