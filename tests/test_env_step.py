@@ -252,3 +252,94 @@ def test_single_env_backends_agree(kw):
     assert impacts > 0 or kw["task"] != "impacts"
 
 
+
+
+# -- the entry points' packing of the constants, and the CPU loop's hoisting ---------------------------------
+def test_pack_round_trips_every_field_exactly():
+    """pack() holds the 56 constants in one float64 array (ints and bools as int64 bits): unpack() gives
+    back the very records, the int64 range included (the single env's max_steps is int64's max)."""
+    core = Core(*resolve("stadium", "impacts"), backend="python")
+    p = functional.env_params(core, np.iinfo(np.int64).max)
+    m = scalar_model(core.params, core.table, core.law, core.settings)
+    c = functional.pack(p, m, core.k)
+    assert c.dtype == np.float64 and c.shape == (len(p) + len(m) + len(core.k),)
+    p2, m2, k2 = functional.unpack(c)
+    assert (p2, m2, k2) == (p, m, core.k)
+    assert p2.max_steps == np.iinfo(np.int64).max and type(p2.max_steps) is int and type(p2.plane) is bool
+    for rec, back in ((p, p2), (m, m2), (core.k, k2)):
+        for name in rec._fields:  # the same type, and the same bits for floats
+            a, b = getattr(rec, name), getattr(back, name)
+            assert type(a) is type(b), name
+            if isinstance(a, float):
+                assert _bits(a) == _bits(b), name
+    with pytest.raises(ValueError, match="56 fields"):
+        functional.pack(p, m, ())
+
+
+def test_pack_refuses_a_field_it_cannot_hold():
+    from typing import NamedTuple
+
+    class Named(NamedTuple):
+        x: float
+        name: str
+    with pytest.raises(TypeError, match="Named.name"):
+        functional._field_kinds((Named,))
+
+
+def test_cpu_loop_takes_the_record_arrays_once_before_the_loop():
+    """builder.hoisted_source: the vector step's CPU loop has step_env's statements in place, its 14
+    extractions (S = st[0], ...) before the loop (numba counts references per extraction and penny
+    otherwise); a body that returns, or one whose parameters are not (index, the loop's), is not hoisted."""
+    import ast
+
+    from penny_env.physics.builder import hoisted_loop, hoisted_source
+    src = hoisted_source(functional.step_envs, functional.step_env)
+    fn = ast.parse(src).body[0]
+    loop_at = next(j for j, s in enumerate(fn.body) if isinstance(s, ast.For))
+    before = [ast.unparse(s) for s in fn.body[:loop_at]]
+    assert len(before) == 14 and "S = st[0]" in before and "times = buf[1]" in before
+    assert fn.body[loop_at].iter.func.id == "prange" and ast.unparse(fn.body[loop_at].target) == "i"
+    assert "step_env(" not in src and "env_step(env_row(st, i)" in src
+    assert hoisted_source(functional.observe_rows, functional.observe_row).splitlines()[1] == "    trig = st[1]"
+
+    def body_returns(i, a):
+        x = a[0]
+        if i:
+            return
+        x[i] = 1.0
+
+    def loop_returns(a):
+        for i in prange(a.shape[0]):  # noqa: F821
+            body_returns(i, a)
+
+    def body_renamed(j, b):
+        x = b[0]
+        x[j] = 1.0
+
+    def loop_renamed(a):
+        for i in prange(a.shape[0]):  # noqa: F821
+            body_renamed(i, a)
+    assert hoisted_source(loop_returns, body_returns) is None
+    assert hoisted_source(loop_renamed, body_renamed) is None
+    assert hoisted_loop(loop_returns, {"body_returns": body_returns}) is None
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [3, 600])
+def test_hoisted_loop_steps_like_the_plain_step(n):
+    """The compiled vector step (hoisted loop; serial below parallel.SERIAL_BELOW, parallel above) equals
+    the plain-Python one bitwise, impacts included."""
+    out = []
+    for backend in ("python", "numba"):
+        env = gym.make_vec("PennyImpacts-Stadium-v0", num_envs=n, backend=backend).unwrapped
+        env.reset(seed=5)
+        rng = np.random.default_rng(1)
+        rows = []
+        for _ in range(300 if n < 100 else 30):
+            obs, rew, term, trunc, info = env.step(rng.uniform(-1, 1, (n, 2)).astype(np.float32))
+            rows.append((obs, rew, term, trunc, info["impacts"], info["impact_times"], env.states))
+        out.append(rows)
+    assert sum(int(r[4].sum()) for r in out[0]) > 0
+    for a, b in zip(*out):
+        for x, y in zip(a, b):
+            assert np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)

@@ -9,6 +9,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..physics.compiled import announce_compile, compiles
+from ..physics.parallel import SERIAL_BELOW
 from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
 from .functional import env_functions, env_params, kinetic_energy, pack
@@ -148,7 +149,7 @@ class PennyVectorEnv(VectorEnv):
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        for key in ("_core", "_fns", "_p", "_m", "_consts", "_gpu"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_gpu", "_step_envs"):
             state.pop(key)
         state["_scratch"] = None
         if self._gpu is not None and self._S is not None:  # the device's state travels as host arrays
@@ -179,6 +180,10 @@ class PennyVectorEnv(VectorEnv):
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
         self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
+        self._scratch = None
+        # fewer envs than parallel.SERIAL_BELOW: the serial loop, called directly (parallel.locked)
+        serial = getattr(self._fns["step_envs"], "serial", None)
+        self._step_envs = serial() if serial is not None and self.num_envs < SERIAL_BELOW else self._fns["step_envs"]
         self._gpu = None
         if on_gpu:
             from .cuda_step import CudaStep
@@ -352,14 +357,15 @@ class PennyVectorEnv(VectorEnv):
         energy = np.empty(n)
         limit = np.empty(n, dtype=np.int8)
         # the info's impact counts, times and ends are the buffers' (new arrays each step); the post-impact
-        # states and rest flags, which the info does not return, are reused from step to step
-        if self._scratch is None or self._scratch[0].shape != (n, K, 6):
-            self._scratch = (np.empty((n, K, 6)), np.empty((n, K), dtype=np.int8))
-        buf = (np.empty(n, dtype=np.int64), np.empty((n, K)), np.empty((n, K), dtype=np.int8), *self._scratch,
-               np.empty(n, dtype=np.int64))  # (scalar.ImpactBuffers' fields; step_env clears every row)
+        # states, rest flags and arc counts, which the info does not return, are reused from step to step
+        if self._scratch is None:
+            self._scratch = (np.empty((n, K, 6)), np.empty((n, K), dtype=np.int8), np.empty(n, dtype=np.int64))
+        post, rest, arc_count = self._scratch
+        buf = (np.empty(n, dtype=np.int64), np.empty((n, K)), np.empty((n, K), dtype=np.int8), post, rest,
+               arc_count)  # (scalar.ImpactBuffers' fields; step_env clears every row)
         # from here to the autoreset flags the step's bookkeeping must run whole (class docstring)
         self._in_step = True
-        self._fns["step_envs"](self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), buf)
+        self._step_envs(self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), buf)
         n_imp, times, ends = buf[0], buf[1], buf[2]
         self._extend_trails()
         done = term | trunc
@@ -459,7 +465,8 @@ class PennyVectorEnv(VectorEnv):
             time, dist, count = (g.out(getattr(g.st, name)).clone() if g.outputs == "torch" else g.host(name)
                                  for name in ("time", "dist", "count"))
         else:
-            time, dist, count = self._t.copy(), self._d.copy(), self._count.copy()
+            time, dist = self._t.copy(), self._d.copy()
+            count = self._count.copy() if self._core.impacts else None
         info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
                 "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": energy,
                 "_kinetic_energy": t.copy(), "time": time, "_time": t.copy(), "distance": dist,

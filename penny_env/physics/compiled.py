@@ -216,12 +216,12 @@ def physics_modules() -> tuple:
     physics and every registered table's module (their formulas are compiled into the loop)."""
     import sys
 
-    from . import flows, kernels, numba_math, scalar
+    from . import builder, flows, kernels, numba_math, scalar
     from .laws import COMPILED_LAWS
     from .tables import COMPILED_FORMULAS
     tables = tuple(dict.fromkeys(sys.modules[f.__module__] for f in [g for pair in COMPILED_FORMULAS for g in pair] + COMPILED_LAWS
                                  if f.__module__.startswith("penny_env.")))  # users' formulas are never cached
-    return (kernels, flows, scalar, numba_math, importlib.import_module(__name__)) + tables
+    return (kernels, flows, scalar, numba_math, builder, importlib.import_module(__name__)) + tables
 
 
 def jit_copy(f, namespace, jit, variant="", math=None):

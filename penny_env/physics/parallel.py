@@ -86,13 +86,19 @@ def locked(f, serial=None, count=None):
     built = []
     count = count or (lambda args: args[0].shape[-1])
 
+    def serial_function():
+        if not built:
+            built.append(serial())
+        return built[0]
+
     def call(*args):
         if serial is not None and (_FORKED_AFTER_OPENMP or count(args) < SERIAL_BELOW):
-            if not built:
-                built.append(serial())
-            return built[0](*args)
+            return serial_function()(*args)
         with PARALLEL_LOCK:
             return f(*args)
     call.__name__ = getattr(f, "__name__", "call")
     call.__wrapped__ = f
+    # for a caller whose batch is always smaller than SERIAL_BELOW: the serial function, called directly
+    # (right in a forked child too), saves the check and the lock on every call
+    call.serial = serial_function if serial is not None else None
     return call
