@@ -462,10 +462,9 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
         b.copies((env_step, step_env, observe_row))
         fns = {"step_envs_kernel": b.loop(step_envs), "observe_rows_kernel": b.loop(observe_rows)}
     else:
-        b.copy(env_step)
-        single = b.copy(env_step_packed)
-        # inlined into the parallel loop: called there as a function, its many arguments cost more than its work
+        # inlined into the entries and the loop: called as a function, its many arguments cost more than its work
         b.copy(env_step, inline=True)
+        single = b.copy(env_step_packed)
         # inlined into the parallel loop: called there as a function, its many arguments cost more than its
         # work (they write by position, see step_env; tests/test_parallel.py checks parallel against serial)
         b.copies((step_env, observe_row), inline=True)
