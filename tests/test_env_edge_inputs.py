@@ -85,11 +85,11 @@ def test_interrupted_vector_step_needs_a_reset(backend):
     vec.reset(seed=0)
     a = np.zeros((3, 2), np.float32)
     vec.step(a)
-    step_envs = vec._fns["step_envs"]
-    vec._fns = dict(vec._fns, step_envs=_interrupting(step_envs, lambda: None))
+    step_envs = vec._step_envs  # (the loop the step calls: the serial one, for 3 envs)
+    vec._step_envs = _interrupting(step_envs, lambda: None)
     with pytest.raises(KeyboardInterrupt):
         vec.step(a)  # the kernel ran (each episode reached its 2 steps) but the autoreset flags were not set
-    vec._fns = dict(vec._fns, step_envs=step_envs)
+    vec._step_envs = step_envs
     with pytest.raises(ResetNeeded, match="interrupted"):
         vec.step(a)
     with pytest.raises(ResetNeeded, match="interrupted"):
