@@ -88,6 +88,10 @@ REPORTS = {
         f"python -m training.fair_rl --cells Steer:{t}:elastic --out docs/fair_rl_extra/{t}/fair_rl.md",
         ("training/fair_rl.py", "training/witness.py", "training/witness_study.py") + _ENV + _PHYSICS + _TABLES)
        for t in ("circle", "rounded_rectangle")},
+    "docs/fair_pure_rl.md": ("python -m training.fair_pure_rl --out docs/fair_pure_rl.md",
+                             ("training/fair_pure_rl.py", "training/fair_rl.py", "training/witness.py",
+                              "training/witness_study.py", "training/study_report.py", "training/episodes.py",
+                              "penny_env/sb3.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     "docs/contention.md": ("python -m penny_env.analysis.contention --out docs/contention.md",
                            ("penny_env/analysis/contention.py", "penny_env/physics/parallel.py",
                             "penny_env/physics/compiled.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
@@ -119,6 +123,7 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "penny_env.analysis.billiards": "docs/billiards.md",
                   "training.witness_study": "docs/witnesses.md",
                   "training.fair_rl": "docs/fair_rl.md",
+                  "training.fair_pure_rl": "docs/fair_pure_rl.md",
                   "penny_env.analysis.contention": "docs/contention.md",
                   "penny_env.analysis.compile_time": "docs/compile_time.md",
                   "training.ppo_compare": "docs/ppo_torch.md"}
