@@ -343,3 +343,63 @@ def test_hoisted_loop_steps_like_the_plain_step(n):
     for a, b in zip(*out):
         for x, y in zip(a, b):
             assert np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)
+
+
+def _double_and_count(v, out, j):
+    """(test helper for the source inliner) one return, at the end."""
+    w = v * 2.0
+    if w > 1.0:
+        out[j] = w
+    else:
+        w = -w
+    return w, j + 1
+
+
+def _two_returns(v, out, j):
+    if v > 0:
+        return v
+    return -v
+
+
+def _loop_body(i, X, out, total):
+    v = X[i]
+    w, n = _double_and_count(v, out, i)
+    total[i] = w + n
+
+
+def _loop(X, out, total):
+    for i in prange(X.shape[0]):  # noqa: F821 (range in the scope the test runs it in)
+        _loop_body(i, X, out, total)
+
+
+def test_source_inliner_pastes_calls_with_the_callers_names():
+    """builder.inline_source: the vector step's CPU loop has env_step and run_interval pasted in, their
+    array arguments under the caller's own names (numba copies an inlined function's arguments, and each
+    array copy costs two atomic operations per penny where the function calls one that may raise); a small
+    loop so pasted computes what the original computes; functions that cannot be pasted leave the loop."""
+    import ast
+
+    from penny_env.physics.builder import hoisted_source, inline_source
+    src = hoisted_source(functional.step_envs, functional.step_env, (functional.env_step, scalar.run_interval))
+    calls = {n.func.id for n in ast.walk(ast.parse(src)) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+    assert "env_step" not in calls and "run_interval" not in calls and "advance_into" in calls
+    assert "advance_into(_run_interval2_s, _env_step1_acc1, _env_step1_acc2, _run_interval2_dt, m, " \
+           "_run_interval2_stop_after, buf, i, 0.0," in src  # buf and i: the loop's own names
+    # a pasted loop computes what the original does, in plain Python
+    inlined = hoisted_source(_loop, _loop_body, (_double_and_count,))
+    assert "_double_and_count(" not in inlined and "out[i] = __double_and_count1_w" in inlined
+    scope = {"prange": range}
+    exec(compile(inlined, "<test>", "exec"), scope)  # noqa: S102
+    X = np.array([0.2, 0.7, -1.5, 3.0])
+    ref = (np.zeros(4), np.zeros(4))
+    got = (np.zeros(4), np.zeros(4))
+    for i in range(4):
+        _loop_body(i, X, *ref)
+    scope["_loop"](X, *got)
+    assert np.array_equal(ref[0], got[0]) and np.array_equal(ref[1], got[1])
+    # not pasted: two returns; a keyword argument; a callee's global shadowed by the caller's local
+    stmt = ast.parse("y = _two_returns(v, out, i)").body
+    assert inline_source(stmt, (_two_returns,), set()) is None
+    assert inline_source(ast.parse("y = _double_and_count(v, out, j=i)").body, (_double_and_count,), set()) is None
+    assert inline_source(ast.parse("y = _double_and_count(v, out, i)").body, (_double_and_count,), set()) is not None
+    assert hoisted_source(_loop, _loop_body, (_two_returns,)) is not None  # (no call of it: nothing to paste)

@@ -470,7 +470,8 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
         b.copies((step_env, observe_row), inline=True)
         fns = {"env_step": single,
                # one parallel call at a time (parallel.locked), serially for few envs or in a forked child
-               "step_envs": b.loop(step_envs, entry=step_envs_packed, count=_vector_count)}
+               "step_envs": b.loop(step_envs, entry=step_envs_packed, count=_vector_count,
+                                   inline=(env_step, run_interval))}
         b.namespace["observe_rows"] = b.copy(observe_rows)
         fns["observe_rows"] = b.copy(observe_rows_packed)
         fns["initial_observation"] = b.copy(initial_observation_packed)

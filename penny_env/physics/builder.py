@@ -20,7 +20,8 @@ body's signature. So the per-penny work is the same function on all three target
 two-line glue differs. On the CPU the body's text is placed in the loop (:func:`hoisted_loop_source`),
 with its extractions of arrays from the record arguments (``S = st[0]``) moved before the loop: numba
 counts references to every array a statement extracts, with two atomic operations per array per
-penny, which at 18 arrays cost a quarter of the open plane's whole step.
+penny, which at 18 arrays cost a quarter of the open plane's whole step; and the calls of the step and
+the event loop's driver are pasted in at the source level (:func:`inline_source`).
 
 The copies of one build share one namespace: a function calls the copies of its callees, never the
 plain Python ones. Every copy's name carries the table variant and a hash of all the sources it
@@ -131,12 +132,13 @@ class Builder:
         for f in functions:
             self.copy(f, **kw)
 
-    def loop(self, f, entry=None, count=None):
+    def loop(self, f, entry=None, count=None, inline=()):
         """The loop over pennies f, compiled for the target: CPU, parallel (``prange``) with a serial copy
         for small batches and forked children, under parallel.locked; CUDA, :meth:`kernel` of f's body;
         python, f itself. entry: a plain function that unpacks its arguments and calls f (the loop is then
         called through the entry's copy, bound to the parallel or the serial loop); count(args): the
-        pennies of a call (default: the first argument's last axis)."""
+        pennies of a call (default: the first argument's last axis); inline: plain functions whose calls
+        in the body the CPU loop has pasted in (:func:`inline_source`)."""
         if self.target == "cuda":
             return self.kernel(f)
         if self.target == "python":
@@ -144,7 +146,7 @@ class Builder:
             return entry or f
         from . import parallel
         from .compiled import jit_copy
-        f = hoisted_loop(f, self.namespace) or f
+        f = hoisted_loop(f, self.namespace, tuple(inline)) or f
         fast = self.copy(f, jit=self._parallel)
         if entry is not None:
             fast = self.copy(entry)
@@ -184,15 +186,16 @@ class Builder:
         return launch
 
 
-def hoisted_loop(loop, namespace):
+def hoisted_loop(loop, namespace, inline=()):
     """The CPU version of a loop over pennies (``for i in prange(N): body(i, args)``, body found in
     ``namespace``): the body's statements in the loop, its extractions moved before it
-    (:func:`hoisted_source`); None where the body does not allow it (the loop then calls the body)."""
+    (:func:`hoisted_source`), the calls of the functions ``inline`` pasted in; None where the body does
+    not allow it (the loop then calls the body)."""
     body = namespace.get(loop_parts(loop)[0])
     body = getattr(body, "py_func", body)
     if not isinstance(body, types.FunctionType):
         return None
-    source = hoisted_source(loop, body)
+    source = hoisted_source(loop, body, inline)
     if source is None:
         return None
     scope = {}
@@ -206,12 +209,13 @@ def hoisted_loop(loop, namespace):
 
 
 @functools.lru_cache(maxsize=None)
-def hoisted_source(loop, body) -> str | None:
+def hoisted_source(loop, body, inline=()) -> str | None:
     """Source of ``loop`` (``for i in prange(COUNT): body(i, <the loop's arguments>)``) with the body's
     statements in place of the call, and the body's top-level statements ``NAME = ARG[INTEGER]`` (an
-    array taken from a record argument, NAME assigned nowhere else) before the loop. None where the body
-    cannot be placed in a loop as it is: its parameters are not (index, <the loop's>), it returns, or it
-    assigns a name the loop takes."""
+    array taken from a record argument, NAME assigned nowhere else) before the loop; the calls of the
+    functions ``inline`` pasted in (:func:`inline_source`). None where the body cannot be placed in a loop
+    as it is: its parameters are not (index, <the loop's>), it returns, or it assigns a name the loop
+    takes."""
     import ast
     import textwrap
 
@@ -239,11 +243,96 @@ def hoisted_source(loop, body) -> str | None:
     rest = [s for s in stmts if not extraction(s)]
     if not rest:
         return None
+    if inline:
+        rest = inline_source(rest, inline, taken=set(stores) | set(params))
+        if rest is None:
+            return None
     lines = [f"def {loop.__name__}({', '.join(params)}):"]
     lines += ["    " + ast.unparse(s) for s in hoisted]
     lines.append(f"    for {bparams[0]} in prange({count}):")
     lines += [textwrap.indent(ast.unparse(s), "        ") for s in rest]
     return "\n".join(lines) + "\n"
+
+
+def inline_source(stmts, functions, taken):
+    """Source-level inlining (CPU loops): every statement ``TARGETS = f(ARGS)`` in ``stmts`` (at any depth)
+    whose f is one of ``functions`` becomes f's statements, its parameters replaced by the arguments that
+    are plain names (the others go first into fresh locals), its locals renamed apart, and its one final
+    ``return X`` becoming ``TARGETS = X``; the pasted statements are inlined in turn. Why: numba inlines
+    a function (``inline="always"``) by assigning its arguments to new variables, and a new variable
+    holding an array costs two atomic reference-count operations per array and call where the function
+    also calls one that may raise (numba issue 2350: its pruning pass cannot remove them across the
+    error path); pasted with the caller's own names, the arrays are never copied. Returns the new list, or
+    None where a function cannot be pasted (not one final return, keyword arguments, a global that the
+    caller's names would shadow): the loop then stays as it is."""
+    import ast
+    import textwrap
+
+    by_name = {f.__name__: f for f in functions}
+    count = [0]
+
+    def paste(call, targets):
+        f = by_name[call.func.id]
+        fn = ast.parse(textwrap.dedent(inspect.getsource(f))).body[0]
+        params = [a.arg for a in fn.args.args]
+        if (call.keywords or any(isinstance(a, ast.Starred) for a in call.args) or len(call.args) != len(params)
+                or fn.args.vararg or fn.args.kwarg or fn.args.kwonlyargs):
+            return None
+        body = [s for s in fn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+        nested = (ast.Yield, ast.YieldFrom, ast.FunctionDef, ast.Lambda, ast.Global, ast.Nonlocal)
+        returns = [n for n in ast.walk(fn) if isinstance(n, ast.Return)]
+        if (not body or not isinstance(body[-1], ast.Return) or body[-1].value is None or len(returns) != 1
+                or any(isinstance(n, nested) for n in ast.walk(fn) if n is not fn)):
+            return None
+        count[0] += 1
+        tag = f"_{f.__name__}{count[0]}_"
+        stored = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)}
+        loaded = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)}
+        if (loaded - stored - set(params)) & taken:  # a global of f that a local of the caller would shadow
+            return None
+        rename, first = {}, []
+        for name, arg in zip(params, call.args):
+            if isinstance(arg, ast.Name) and name not in stored:
+                rename[name] = arg.id
+            else:
+                rename[name] = tag + name
+                first.append(ast.Assign(targets=[ast.Name(tag + name, ast.Store())], value=arg, lineno=0))
+        rename.update({name: tag + name for name in stored - set(params)})
+        taken.update(v for v in rename.values())
+
+        class Rename(ast.NodeTransformer):
+            def visit_Name(self, node):
+                return ast.copy_location(ast.Name(rename.get(node.id, node.id), node.ctx), node)
+        body = [Rename().visit(s) for s in body]
+        last = ast.Assign(targets=targets, value=body[-1].value, lineno=0)
+        return first + body[:-1] + [last]
+
+    def walk(block):
+        out = []
+        for s in block:
+            value = s.value if isinstance(s, (ast.Assign, ast.Expr)) else None
+            if (isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id in by_name
+                    and taken.isdisjoint({value.func.id})):
+                targets = s.targets if isinstance(s, ast.Assign) else [ast.Name("_", ast.Store())]
+                pasted = paste(value, targets)
+                if pasted is None:
+                    return None
+                pasted = walk(pasted)
+                if pasted is None:
+                    return None
+                out += pasted
+                continue
+            for field in ("body", "orelse", "finalbody"):
+                inner = getattr(s, field, None)
+                if isinstance(inner, list) and inner and isinstance(inner[0], ast.stmt):
+                    new = walk(inner)
+                    if new is None:
+                        return None
+                    setattr(s, field, new)
+            out.append(s)
+        return out
+
+    return walk([ast.parse(ast.unparse(s)).body[0] for s in stmts])  # (copies: the cached trees stay intact)
 
 
 @functools.lru_cache(maxsize=None)

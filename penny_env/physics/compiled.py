@@ -390,8 +390,10 @@ def _physics_build(target, kind):
     # parallel loops lose writes through a NamedTuple's attribute made in the loop body itself, see
     # envs/functional.step_env)
     b.copies((angle_trig_into, advance_penny, first_impact_penny), inline=True)
-    for loop in (advance_batch, first_impact_batch):  # called under parallel.PARALLEL_LOCK on the CPU
-        functions[loop.__name__] = b.loop(loop)
+    # called under parallel.PARALLEL_LOCK on the CPU; the event loop's driver pasted into the batch loop
+    # (builder.inline_source: no per-penny reference counting of the buffers)
+    functions["advance_batch"] = b.loop(advance_batch, inline=(scalar.run_interval,))
+    functions["first_impact_batch"] = b.loop(first_impact_batch)
     b.functions = functions
     return b
 

@@ -534,11 +534,14 @@ def run_interval(s, c_ph, s_ph, acc1, acc2, dt, m, plane, resume, stop_after, bu
     call (:func:`advance_into`: the env step, which ends the episode where the cap stopped it).
     Returns (state, elapsed)."""
     clear_row(buf, row)
+    # (one return, at the end: the CPU builder may paste this body into its caller, builder.inline_source)
     if plane or certified_free_trig(s, c_ph, s_ph, acc1, acc2, dt, m):
-        return flow1(s, acc1, acc2, dt, m.R), dt
-    if resume:
-        return advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc)
-    return advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, 0.0, arc)
+        out = flow1(s, acc1, acc2, dt, m.R), dt
+    elif resume:
+        out = advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc)
+    else:
+        out = advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, 0.0, arc)
+    return out
 
 
 # -- lists of impacts, in plain Python (tests, analysis): the loop above with a buffer ---------------------
