@@ -16,6 +16,27 @@ def test_compare_quick_writes_ratios(tmp_path):
     assert out.read_text() == report
     assert "| PennyReach-Plane-v0 | 1 |" in report
     assert "speed ratio after / before" in report
+    assert "- beside: nothing added" in report
+
+
+def test_compare_busy_runs_a_spinner_beside_and_says_so(tmp_path, monkeypatch):
+    """--busy: one spinning process beside the measurement (killed afterwards), named in the header, with
+    the busy report's sources line."""
+    started = []
+    real = throughput_compare.subprocess.Popen
+
+    def popen(*a, **kw):
+        started.append(real(*a, **kw))
+        return started[-1]
+    monkeypatch.setattr(throughput_compare.subprocess, "Popen", popen)
+    out = tmp_path / "busy.md"
+    report = throughput_compare.main(["--busy", "--before", str(ROOT), "--after", str(ROOT), "--quick", "--ids",
+                                      "PennyReach-Plane-v0", "--sizes", "1", "--out", str(out)])
+    assert "- beside: one spinning Python process for the whole run" in report
+    assert "| PennyReach-Plane-v0 | 1 |" in report
+    spinners = [p for p in started if "while True" in str(p.args[-1])]  # (the workers start through Popen too)
+    assert len(spinners) == 1 and len(started) == 3
+    assert spinners[0].poll() is not None  # the spinner is gone
 
 
 def test_compare_refuses_a_tree_without_the_package(tmp_path):

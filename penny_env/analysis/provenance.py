@@ -106,6 +106,9 @@ REPORTS = {
     # module makes it stale
     "docs/throughput_compare.md": ("python -m penny_env.analysis.throughput_compare --before OLD --after NEW "
                                    "--out docs/throughput_compare.md", ("penny_env/analysis/throughput_compare.py",)),
+    "docs/throughput_compare_busy.md": ("python -m penny_env.analysis.throughput_compare --busy --before OLD --after NEW "
+                                        "--out docs/throughput_compare_busy.md",
+                                        ("penny_env/analysis/throughput_compare.py",)),
 }
 # the command modules whose header writes the line (common.header's module argument -> report)
 MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",

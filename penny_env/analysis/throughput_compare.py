@@ -16,6 +16,10 @@ round-to-round noise instead of a bias of one tree. The report gives two after /
 the ratio within a round (the two trees measured back to back, in the same order); it lists every
 measurement whose ratio of either kind shows a loss of more than ``--tolerance`` (default 5%).
 
+``--busy``: one spinning Python process runs beside the whole measurement (a learner's core, as users
+train beside the env; penny_env.analysis.contention compares threading setups that way); the report's
+sources line is then that of docs/throughput_compare_busy.md (provenance.REPORTS).
+
 ``--quick`` (tests): one round, two ids, N <= 16, few steps, and the report goes to a temporary directory
 unless ``--out`` is given.
 """
@@ -130,6 +134,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--tolerance", type=float, default=0.05, help="a loss beyond this share is listed")
     ap.add_argument("--out", default=None, help="Markdown report (default: a temporary directory)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--busy", action="store_true", help="one spinning Python process beside the measurement")
     ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                     help="wall: time.perf_counter; cpu: time.process_time (all of the process's threads: steadier on a "
                          "machine loaded by other work, but it counts the threads' CPU time, not the elapsed time)")
@@ -157,10 +162,16 @@ def main(argv: list[str] | None = None) -> str:
     if args.rounds < 1:
         ap.error(f"--rounds must be >= 1, got {args.rounds}")
     runs = {"before": [], "after": []}
-    for r in range(args.rounds):
-        for name in ("before", "after"):
-            runs[name].append(_measure(getattr(args, name), args, order_seed=r))
-            print(f"round {r + 1}/{args.rounds}: {name} measured", flush=True)
+    spinner = subprocess.Popen([sys.executable, "-c", "while True:\n    pass\n"]) if args.busy else None
+    try:
+        for r in range(args.rounds):
+            for name in ("before", "after"):
+                runs[name].append(_measure(getattr(args, name), args, order_seed=r))
+                print(f"round {r + 1}/{args.rounds}: {name} measured", flush=True)
+    finally:
+        if spinner is not None:
+            spinner.kill()
+            spinner.wait()
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
     cmd = "python -m penny_env.analysis.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
     # (imported here: the workers run this file against other source trees, which may lack these)
@@ -169,7 +180,10 @@ def main(argv: list[str] | None = None) -> str:
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
-             f"- command: `{cmd}`", load_line(), stamp_line("docs/throughput_compare.md"),
+             f"- command: `{cmd}`", load_line(),
+             stamp_line("docs/throughput_compare_busy.md" if args.busy else "docs/throughput_compare.md"),
+             "- beside: " + ("one spinning Python process for the whole run (a learner's core)" if args.busy
+                             else "nothing added (the machine as it was)"),
              f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), each in its own "
              f"shuffled order (the same for both trees); clock: "
              f"{'CPU time (time.process_time)' if args.clock == 'cpu' else 'wall clock'}",
