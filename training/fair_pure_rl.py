@@ -68,7 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.fair_rl import parse_cell
+from training.fair_rl import parse_cell, write_csv
 from training.study_report import FLAT, clopper_pearson, last_quarter_change, seed_clustered_ci
 from training.witness import Witness, positive_int
 from training.witness_study import PROBE_TASKS, TABLE_NAMES, cell_spec
@@ -289,14 +289,6 @@ def run_cell(cell, agents, cfg, log=print):
 
 
 # -- the report -----------------------------------------------------------------------------------------
-def write_csv(path, rows, fields):
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: r.get(k, "") for k in fields})
-
-
 def read_csv(path):
     with open(path, newline="") as f:
         return list(csv.DictReader(f))

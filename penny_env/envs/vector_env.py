@@ -145,7 +145,7 @@ class PennyVectorEnv(VectorEnv):
         self._renderers = None
         self._true = np.ones(n, dtype=bool)
         self._in_step = False
-        self._scratch = None  # the step's post-impact states and rest flags (reused)
+        self._scratch = None  # the step's post-impact states, rest flags and arc counts (reused)
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -180,7 +180,6 @@ class PennyVectorEnv(VectorEnv):
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
         self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
-        self._scratch = None
         # fewer envs than parallel.SERIAL_BELOW: the serial loop, called directly (parallel.locked)
         serial = getattr(self._fns["step_envs"], "serial", None)
         self._step_envs = serial() if serial is not None and self.num_envs < SERIAL_BELOW else self._fns["step_envs"]
