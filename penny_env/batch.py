@@ -89,7 +89,7 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     h = _times(horizon, n, "horizon")
     settings = check_settings(settings)
     if _backend(backend) == "cuda":
-        from .physics.compiled import CompiledBatch
+        from .backends.batch import CompiledBatch
         from .physics.laws import ImpactLaw
         from .physics.pennies import FIRST_IMPACT_ROUNDS
         return CompiledBatch(params, tab, ImpactLaw("elastic", 1.0), settings, target=_cuda_target()).first_impacts(
@@ -152,9 +152,9 @@ def _cuda_target():
     """'cuda', checked: numba-cuda installed and a GPU (or its simulator) usable, else ValueError."""
     import importlib.util
 
-    from .physics.builder import cuda_available
+    from .backends.builder import cuda_available
     if importlib.util.find_spec("numba_cuda") is None:
-        raise ValueError("backend='cuda' needs numba-cuda: pip install 'penny-env[cuda]'")
+        raise ValueError("backend='cuda' needs numba-cuda: from a clone of penny_env, pip install -e '.[cuda]'")
     if not cuda_available():
         raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
     return "cuda"
@@ -162,7 +162,8 @@ def _cuda_target():
 
 def _stepper(params, table, law, settings, backend):
     """The event loop over one interval for (6, N) states: (new S, None or (env, time, end, post))."""
-    from .physics.compiled import CompiledBatch, choose_backend, compiles
+    from .backends.batch import CompiledBatch
+    from .backends.choice import choose_backend, compiles
 
     if _backend(backend) == "cuda":
         if not compiles(table):

@@ -211,7 +211,8 @@ def iterate(states, ends, n_impacts, *, table, law, params=None, rescale=True) -
 def _searcher(params, tab):
     """The first-impact search for (N, 6) rows within HORIZON: the compiled batch kept for the whole run
     (batch.first_impact builds and warms up a new one per call, about 10 ms) where numba is installed."""
-    from ..physics.compiled import CompiledBatch, choose_backend
+    from ..backends.batch import CompiledBatch
+    from ..backends.choice import choose_backend
     from ..physics.params import DEFAULT_SETTINGS
     from ..physics.pennies import FIRST_IMPACT_ROUNDS
 

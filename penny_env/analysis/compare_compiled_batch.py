@@ -23,7 +23,7 @@ import json, sys, time
 import numpy as np
 import penny_env as pe
 from penny_env.envs import resolve
-from penny_env.physics.compiled import CompiledBatch
+from penny_env.backends.batch import CompiledBatch
 n, steps, speed = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[4])
 out = {}
 for name in ("ellipse", "circle", "stadium", "plane"):

@@ -1,11 +1,10 @@
-"""What PennyEnv and PennyVectorEnv share besides the step (functional.py): the scene's constants,
-the spaces' bounds and the per-episode sampling.
+"""What PennyEnv and PennyVectorEnv share besides the step (functional.py): the scene's constants, the task's
+record and constants, the spaces' bounds, the seeds' checks and the reset options' checks.
 
-Episode randomness is counter based: the initial state and the target of episode ``e`` of an env
-whose seed key is ``k`` are a hash (SplitMix64) of (k, e, draw index), computed with uint64 numpy
-arrays. A sub-env of the vector env seeded with ``seed + i`` therefore draws exactly what a single
-env seeded with ``seed + i`` draws, episode after episode, and the draws of many envs are one
-array operation (no per-env generator objects in the step path).
+Episode randomness is counter based (envs/draws.py): the initial state and target of episode ``e`` of an env
+whose seed key is ``k`` are a hash of (k, e, draw index), drawn per env by functional.initial_state on every
+backend. A sub-env of the vector env seeded with ``seed + i`` therefore draws exactly what a single env
+seeded with ``seed + i`` draws, episode after episode, on the CPU and on a GPU.
 """
 from __future__ import annotations
 
@@ -14,24 +13,13 @@ import numpy as np
 
 from ..physics import SolverSettings
 from ..physics.validation import as_state, check_inside, real_array
-from .scene import Scene, Task, ConfigError
-from .tasks import task_constants
+from .config import ConfigError
+from .draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
+from .scene import Scene, Task
+from .tasks import task_record
+from .tasks.base import check_constants
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
-
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
-_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
-N_DRAWS = 8
-OFFSET_TRIES = 64  # target candidates per episode when task.heading_offset > 0
-
-
-def _mix(z):
-    """SplitMix64 finaliser on uint64 arrays (wrapping arithmetic)."""
-    z = (z ^ (z >> _S30)) * _M1
-    z = (z ^ (z >> _S27)) * _M2
-    return z ^ (z >> _S31)
 
 
 MAX_RENDER_FPS = 1000  # metadata["render_fps"] of a scene whose control_dt is below 1 ms
@@ -59,20 +47,6 @@ def check_seed(seed, name: str = "seed", count: int = 1) -> int:
     return seed
 
 
-def seed_keys(seeds) -> np.ndarray:
-    """uint64 keys from integer seeds in [0, 2**64) (check_seed)."""
-    arr = np.array([int(s) % (1 << 64) for s in np.atleast_1d(seeds)], dtype=np.uint64)
-    return _mix(arr + _GOLDEN)
-
-
-def uniforms(keys, episodes, n=N_DRAWS) -> np.ndarray:
-    """(n, N) uniforms in [0, 1) for episode `episodes` of the envs with `keys`."""
-    base = _mix(keys + _GOLDEN * (episodes.astype(np.uint64) + np.uint64(1)))
-    j = (np.arange(1, n + 1, dtype=np.uint64) * _GOLDEN)[:, None]
-    z = _mix(base[None, :] + j)
-    return (z >> _S11).astype(np.float64) * (1.0 / 9007199254740992.0)
-
-
 class Core:
     """Everything the environments compute, from (Scene, Task). Picklable (rebuilt from them)."""
 
@@ -82,8 +56,6 @@ class Core:
         self.params = scene.make_params()
         self.table = scene.make_table()
         self.law = scene.make_law()
-        if task.kind == "impacts" and self.table is None:
-            raise ConfigError("task.kind 'impacts' needs a table with walls; scene.table is the open plane")
         p = self.params
         self.R, self.J, self.Itot = p.R, p.J, p.rolling_inertia
         self.dt = scene.control_dt
@@ -94,30 +66,22 @@ class Core:
         self.plane = self.table is None
         self.L = scene.length_scale()
         self.inv_L = 1.0 / self.L
-        self.s_W = 1.0 / scene.obs_scale["theta_dot"]
-        self.s_w = 1.0 / scene.obs_scale["phi_dot"]
-        self.k = task_constants(scene, task, self.L)
-        self.impacts = task.kind == "impacts"
-        self.obs_dim = 11 if self.impacts else 10
+        self.task_record = task_record(task.kind)
+        if self.task_record.needs_walls and self.table is None:
+            raise ConfigError(f"task.kind {task.kind!r} needs a table with walls; scene.table is the open plane")
+        self.k = self.task_record.constants(scene, task, self.L)
+        check_constants(self.task_record, self.k)
+        self.counts_arc = self.task_record.marked_arc is not None  # info["arc_impacts"]
+        self.impacts = self.counts_arc  # (the name the renderer and the info use)
+        self.obs_dim = self.task_record.obs_dim
         self.max_steps = task.max_episode_steps
         self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
-        ax, ay = scene.spawn_axes()
-        self.ax, self.ay = ax, ay
-        fmax = 1.0 if self.plane else 1.0 - p.R / self.table.inradius
-        self.f_spawn = scene.init["spawn_fraction"]
-        self.f_target = task.target_fraction * fmax
-        self.delta = 0.0 if self.plane else self.settings.contact_tol * self.table.size
-        self.heading_offset = task.heading_offset
-        if self.heading_offset > 0 and not self.heading_offset < self.f_target * min(ax, ay):
-            # any line through the spawn point leaves target points farther than the target
-            # ellipse's semi-minor axis, so below it the accepted region has positive area
-            raise ConfigError(f"task.heading_offset must be < target_fraction (1 - R / inradius) x the spawn "
-                              f"ellipse's semi-minor axis = {self.f_target * min(ax, ay):.6g} m, got {self.heading_offset!r}")
+        self.ax, self.ay = scene.spawn_axes()
 
     def _backend(self, backend):
         """'numba' or 'python': 'auto' takes numba where it is installed and the table compiles
-        (physics.compiled.choose_backend), else the plain-Python step with a warning naming it."""
-        from ..physics.compiled import choose_backend
+        (backends.choice.choose_backend), else the plain-Python step with a warning naming it."""
+        from ..backends.choice import choose_backend
         if backend not in ("auto", "numba", "python"):
             raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
         if backend == "python":
@@ -133,6 +97,16 @@ class Core:
                           "compile); using the plain-Python step (backend='python'), much slower", stacklevel=4)
         return chosen
 
+    def entry_points(self, target=None, **options):
+        """The env step's entry points (backends/env.py) for ``target`` ("python", "cpu", "cuda"; None: this
+        core's backend) and this scene's table kind and task."""
+        from ..backends.env import env_entry_points
+        from ..physics.scalar import scalar_model
+        if target is None:
+            target = "cpu" if self.backend == "numba" else "python"
+        m = scalar_model(self.params, self.table, self.law, self.settings)
+        return env_entry_points(target, m.kind, self.task_record, type(self.k), **options)
+
     def __getstate__(self):
         return {"scene": self.scene, "task": self.task, "settings": self.settings, "backend": self.backend}
 
@@ -145,72 +119,9 @@ class Core:
         if not self.plane:
             hi[8:10] = 2.0
         lo = -hi
-        if self.impacts:
-            lo[10] = 0.0
+        for j, (a, b) in enumerate(self.task_record.extra_obs):  # the task's own entries
+            lo[10 + j], hi[10 + j] = a, b
         return lo, hi
-
-    # -- sampling ------------------------------------------------------------------------
-    def sample(self, keys, episodes):
-        """(S (6, N), target (2, N), arc (2, N) = (cos, sin) of the arc direction)."""
-        u = uniforms(keys, episodes)
-        n = u.shape[1]
-        init = self.scene.init
-        S = np.empty((6, n))
-        r = self.f_spawn * np.sqrt(u[0])
-        a = 2.0 * np.pi * u[1] - np.pi
-        S[X] = r * self.ax * np.cos(a)
-        S[Y] = r * self.ay * np.sin(a)
-        for row, name, j in ((THETA, "theta", 2), (PHI, "phi", 3), (THETA_DOT, "theta_dot", 4), (PHI_DOT, "phi_dot", 5)):
-            lo, hi = init[name]
-            S[row] = lo + (hi - lo) * u[j]
-        b = 2.0 * np.pi * u[7] - np.pi
-        arc = np.empty((2, n))
-        cb, sb = np.cos(b, out=arc[0]), np.sin(b, out=arc[1])
-        target = np.empty((2, n))
-        if self.impacts:
-            rho = self._wall_radius(cb, sb)
-            np.multiply(rho, cb, out=target[0])
-            np.multiply(rho, sb, out=target[1])
-        else:
-            rt = self.f_target * np.sqrt(u[6])
-            target[0] = rt * self.ax * cb
-            target[1] = rt * self.ay * sb
-            if self.heading_offset > 0:
-                self._offset_targets(keys, episodes, S, target)
-        return S, target, arc
-
-    def _offset_targets(self, keys, episodes, S, target):
-        """Redraw, in place, the targets closer than task.heading_offset to the initial heading
-        line: the first of OFFSET_TRIES further candidates (draws N_DRAWS.. of the episode's
-        stream, so the draws above are unchanged) that is far enough, else the farthest one."""
-        c, s = np.cos(S[PHI]), np.sin(S[PHI])
-
-        def offset(tx, ty):
-            return np.abs((tx - S[X]) * s - (ty - S[Y]) * c)
-
-        best = offset(target[0], target[1])
-        u = uniforms(keys, episodes, N_DRAWS + 2 * OFFSET_TRIES)[N_DRAWS:]
-        for i in range(OFFSET_TRIES):
-            todo = best < self.heading_offset
-            if not todo.any():
-                break
-            rt = self.f_target * np.sqrt(u[2 * i])
-            b = 2.0 * np.pi * u[2 * i + 1] - np.pi
-            tx, ty = rt * self.ax * np.cos(b), rt * self.ay * np.sin(b)
-            d = offset(tx, ty)
-            take = todo & (d > best)
-            target[0] = np.where(take, tx, target[0])
-            target[1] = np.where(take, ty, target[1])
-            best = np.where(take, d, best)
-
-    def _wall_radius(self, c, s):
-        """Distance from the centre to the wall along (c, s) (the table's own wall_distance)."""
-        return self.table.wall_distance(c, s)
-
-    def distance(self, S, target):
-        dx = target[0] - S[X]
-        dy = target[1] - S[Y]
-        return np.sqrt(dx * dx + dy * dy)
 
     # -- reset options -------------------------------------------------------------------
     def check_options(self, options, n, extra=()):
@@ -239,9 +150,9 @@ class Core:
                                          "where a step at the torque limits could pass MAX_ANGULAR_SPEED "
                                          "(Scene.step_speed_limits; docs/physics.md#limits)")
         if "target" in options:
-            if self.impacts:
-                raise ValueError("options['target']: the impacts task's target is the centre of the marked arc, "
-                                 "drawn each episode; it cannot be set")
+            if self.task_record.needs_walls:
+                raise ValueError(f"options['target']: the {self.task.kind} task's target is the centre of the marked "
+                                 "arc, drawn each episode; it cannot be set")
             targets = self._rows(options["target"], n, 2, "options['target']")
             for i, t in enumerate(targets):
                 self._check_target(t, "options['target']" if n == 1 else f"options['target'][{i}]")

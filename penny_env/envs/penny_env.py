@@ -9,10 +9,11 @@ import gymnasium as gym
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from ..physics.compiled import announce_compile
+from ..backends.cache import announce_compile
+from ..backends.packing import pack
 from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys
-from .functional import env_functions, env_params, kinetic_energy, pack
+from .functional import env_params, kinetic_energy
 from .scene import resolve
 
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
@@ -186,20 +187,19 @@ class PennyEnv(gym.Env):
         # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes)
         self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
-        self._fns = env_functions(core.backend, self._m.kind)
+        self._fns = core.entry_points()
         self._consts = pack(self._p, self._m, core.k)
         self._buffers(max(IMPACTS_BUFFER, self.max_impacts_in_info))
         if core.backend == "numba":  # load the machine code now, not in the first step
             announce_compile("single env step", "open plane" if core.table is None else type(core.table).__name__,
-                             self._m.kind, self._fns["env_step"])
+                             self._m.kind, self._fns.env_step)
             obs = np.empty((1, core.obs_dim), dtype=np.float32)
-            s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-            trig = self._fns["initial_observation"](obs, s, 0.0, 0.0, self._consts)
-            st = (s, trig, (0.0, 0.0), (1.0, 0.0), 0, 0.0, 0, 0.0)
-            self._fns["env_step"](st, 0.0, 0.0, self._consts, obs, self._buf_args)
+            s, trig, target, arc, d = self._fns.initial_state(np.uint64(0), 0, self._consts, obs)
+            self._fns.observe_state((s, trig, target, arc, 0, d, 0, 0.0), self._consts, obs)
+            self._fns.env_step((s, trig, target, arc, 0, d, 0, 0.0), 0.0, 0.0, self._consts, obs, self._buf_args)
 
     def _buffers(self, capacity):
-        """The step's impact buffers (scalar.ImpactBuffers, one row of ``capacity`` slots), and the plain
+        """The step's impact buffers (scalar.ImpactBuffers, one penny with ``capacity`` slots), and the plain
         tuple of them the compiled step takes."""
         self._buf = impact_buffers(1, capacity)
         self._buf_args = tuple(self._buf)
@@ -223,36 +223,31 @@ class PennyEnv(gym.Env):
         super().reset(seed=seed)
         core = self._core
         if seed is not None:
-            self._key = seed_keys([seed])
+            self._key = seed_keys([seed])[0]
             self._episode = 0
         elif self._key is None:
-            self._key = seed_keys([int(self.np_random.integers(0, 2**63))])
+            self._key = seed_keys([int(self.np_random.integers(0, 2**63))])[0]
             self._episode = 0
         else:
             self._episode += 1
-        S, target, arc = core.sample(self._key, np.array([self._episode], dtype=np.uint64))
+        state = tgt = None
         if options is not None:
-            state, tgt = core.check_options(options, 1)
-            if state is not None:
-                S = state.T
-            if tgt is not None:
-                target = tgt.T
-        self._s = tuple(S[:, 0].tolist())
-        self._target = (float(target[0, 0]), float(target[1, 0]))
-        self._arc = (float(arc[0, 0]), float(arc[1, 0]))
+            state, tgt = core.check_options(options, 1)  # (checked before anything changes)
+        obs = np.empty((1, core.obs_dim), dtype=np.float32)
+        s, trig, target, arc, d = self._fns.initial_state(self._key, self._episode, self._consts, obs)
+        if state is not None or tgt is not None:
+            s = tuple(state[0].tolist()) if state is not None else s
+            target = (float(tgt[0, 0]), float(tgt[0, 1])) if tgt is not None else target
+            trig, d = self._fns.observe_state((s, trig, target, arc, 0, d, 0, 0.0), self._consts, obs)
+        self._s, self._trig, self._target, self._arc, self._d = s, trig, target, arc, d
         self._steps = 0
         self._count = 0
         self._t = 0.0
         self._done = False
         self._in_step = False
-        x, y = self._s[0], self._s[1]
-        dx, dy = self._target[0] - x, self._target[1] - y
-        self._d = math.sqrt(dx * dx + dy * dy)
         self._trail.clear()
-        self._trail.append((x, y))
+        self._trail.append((s[0], s[1]))
         self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
-        obs = np.empty((1, core.obs_dim), dtype=np.float32)
-        self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
         info = self._info(0, (), (), kinetic_energy(self._s, self._p), False)
         if self.render_mode == "human":
             self.render()
@@ -272,18 +267,18 @@ class PennyEnv(gym.Env):
         obs = np.empty((1, c.obs_dim), dtype=np.float32)
         st = (self._s, self._trig, self._target, self._arc, self._count, self._d, self._steps, self._t)
         self._in_step = True  # cleared once the step's results are all stored (see step's docstring)
-        out = self._fns["env_step"](st, a[0], a1, self._consts, obs, self._buf_args)
+        out = self._fns.env_step(st, a[0], a1, self._consts, obs, self._buf_args)
         n_imp = out[6]
         if n_imp > self._capacity:  # more impacts than the buffer holds: the same pure step, a larger buffer
             self._buffers(n_imp)
-            out = self._fns["env_step"](st, a[0], a1, self._consts, obs, self._buf_args)
+            out = self._fns.env_step(st, a[0], a1, self._consts, obs, self._buf_args)
         s, self._trig, self._count, d, self._steps, t, n_imp, reward, terminated, truncated, energy, limit = out
         t_prev = self._t
         self._s = s
         self._d = d
         self._t = t
         if n_imp:
-            times, ends = tuple(self._buf.time[0, :n_imp].tolist()), tuple(self._buf.end[0, :n_imp].tolist())
+            times, ends = tuple(self._buf.time[:n_imp, 0].tolist()), tuple(self._buf.end[:n_imp, 0].tolist())
         else:
             times = ends = ()
         info = self._info(n_imp, times, ends, energy, terminated, limit)
@@ -293,7 +288,7 @@ class PennyEnv(gym.Env):
         if self.render_mode is not None:
             self._trail.append((s[0], s[1]))
             if n_imp:  # the step's own post-impact states (its buffer), for the renderer's flashes
-                self._hud["impacts"].extend((t_prev + ti, end, tuple(self._buf.post[0, j].tolist()))
+                self._hud["impacts"].extend((t_prev + ti, end, tuple(self._buf.post[j, :, 0].tolist()))
                                             for j, (ti, end) in enumerate(zip(times, ends)))
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
@@ -310,7 +305,7 @@ class PennyEnv(gym.Env):
         info = {"impacts": n_imp, "impact_times": impact_times, "impact_ends": impact_ends,
                 "kinetic_energy": energy, "time": self._t, "distance": self._d, "is_success": success,
                 "limit": limit}
-        if self._core.impacts:
+        if self._core.counts_arc:
             info["arc_impacts"] = self._count
         return info
 

@@ -24,26 +24,12 @@ from ..physics.params import MAX_ANGULAR_SPEED
 from ..physics.tables import Table
 from ..physics.tables.base import LENGTH_RANGE
 from ..physics.validation import check_actuation, check_table, step_speed_limits
+from .config import ConfigError, ConfigTypeError, UnknownFieldError, number
+from .tasks import TASKS, Task, all_config_fields, config_fields, task_record
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 
 ACTUATIONS = {"both": (0, 1), "steer": (0,), "drive": (1,)}
-TASK_KINDS = ("reach", "park", "impacts")
-
-
-class ConfigError(ValueError):
-    """An invalid scene/task configuration; the message names the field."""
-
-
-class ConfigTypeError(ConfigError, TypeError):
-    """A configuration field of the wrong type (a string for a number, a list for a mapping): a
-    ConfigError, and a TypeError as the rest of the package raises for a wrong type."""
-
-
-class UnknownFieldError(ConfigError, TypeError):
-    """A field (or keyword argument) that the scene and task do not have: a ConfigError, and a
-    TypeError as Python raises for an unexpected keyword argument (tools such as TorchRL probe
-    keywords that way)."""
 
 
 def _config_error(exc, message):
@@ -51,28 +37,8 @@ def _config_error(exc, message):
     return ConfigTypeError(message) if isinstance(exc, TypeError) else ConfigError(message)
 
 
-def _num(owner: str, name: str, value, *, positive=False, nonneg=False, lo=None, hi=None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        try:
-            import numpy as np
-            if isinstance(value, (np.integer, np.floating)):
-                value = float(value)
-            else:
-                raise TypeError
-        except TypeError:
-            raise ConfigTypeError(f"{owner}.{name} must be a number, got {value!r}") from None
-    value = float(value)
-    if not math.isfinite(value):
-        raise ConfigError(f"{owner}.{name} must be finite, got {value!r}")
-    if positive and value <= 0:
-        raise ConfigError(f"{owner}.{name} must be positive, got {value!r}")
-    if nonneg and value < 0:
-        raise ConfigError(f"{owner}.{name} must be non-negative, got {value!r}")
-    if lo is not None and value < lo:
-        raise ConfigError(f"{owner}.{name} must be >= {lo}, got {value!r}")
-    if hi is not None and value > hi:
-        raise ConfigError(f"{owner}.{name} must be <= {hi}, got {value!r}")
-    return value
+def _num(owner: str, name: str, value, **bounds) -> float:
+    return number(owner, name, value, **bounds)
 
 
 def _range(owner: str, name: str, value) -> tuple[float, float]:
@@ -243,70 +209,7 @@ class Scene:
         return tab.size if tab is not None else self.arena
 
 
-@dataclass(frozen=True)
-class Task:
-    """Reward and termination (see penny_env/presets/tasks/*.yaml and the PennyEnv docstring).
-
-    kind:              "reach" | "park" | "impacts"
-    max_episode_steps: episode length (truncation)
-    tolerance:         [m] success radius around the target (reach, park)
-    speed_tolerance:   [m/s] park: rolling speed |R theta_dot| below this counts as at rest
-    spin_tolerance:    [rad/s] park: and the turning rate |phi_dot| below this (None: not checked)
-    target_fraction:   targets are uniform in this fraction of the spawn ellipse (reach, park)
-    progress_weight:   weight of the progress term (d_prev - d) / L (reach, park)
-    speed_cost:        park: weight of the speed penalty |R theta_dot| / (R obs_scale.theta_dot) near the target
-    ctrl_cost:         weight of the control cost mean(a^2)
-    success_bonus:     reward added on the step that succeeds
-    impact_reward:     impacts: reward per impact on the marked arc
-    arc_half_width:    impacts: [rad] half-width of the marked arc (polar angle of the impact point
-                       about the table's centre); >= pi marks the whole wall
-    impacts_goal:      impacts: success after this many impacts on the arc
-    heading_offset:    reach, park: [m] minimum distance of the target from the initial heading
-                       line (the line through the start contact point along phi); 0 = no constraint.
-                       Targets are drawn by rejection (up to 64 candidates, then the farthest).
-    """
-
-    kind: str = "reach"
-    max_episode_steps: int = 400
-    tolerance: float = 0.02
-    speed_tolerance: float = 0.01
-    spin_tolerance: float | None = None
-    target_fraction: float = 0.6
-    progress_weight: float = 10.0
-    speed_cost: float = 0.1
-    ctrl_cost: float = 0.01
-    success_bonus: float = 10.0
-    impact_reward: float = 1.0
-    arc_half_width: float = 0.5
-    impacts_goal: int = 10
-    heading_offset: float = 0.0
-
-    def __post_init__(self):
-        o = "task"
-        if not isinstance(self.kind, str):
-            raise ConfigTypeError(f"{o}.kind must be a string, one of {list(TASK_KINDS)}, got {self.kind!r}")
-        if self.kind not in TASK_KINDS:
-            raise ConfigError(f"{o}.kind must be one of {list(TASK_KINDS)}, got {self.kind!r}")
-        for name in ("max_episode_steps", "impacts_goal"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, numbers.Integral):
-                raise ConfigTypeError(f"{o}.{name} must be a positive integer, got {v!r}")
-            if v < 1:
-                raise ConfigError(f"{o}.{name} must be a positive integer, got {v!r}")
-            object.__setattr__(self, name, int(v))
-        object.__setattr__(self, "tolerance", _num(o, "tolerance", self.tolerance, positive=True))
-        object.__setattr__(self, "speed_tolerance", _num(o, "speed_tolerance", self.speed_tolerance, positive=True))
-        if self.spin_tolerance is not None:
-            object.__setattr__(self, "spin_tolerance", _num(o, "spin_tolerance", self.spin_tolerance, positive=True))
-        object.__setattr__(self, "target_fraction", _num(o, "target_fraction", self.target_fraction, nonneg=True, hi=1.0))
-        for name in ("progress_weight", "speed_cost", "ctrl_cost", "success_bonus", "impact_reward"):
-            object.__setattr__(self, name, _num(o, name, getattr(self, name), nonneg=True))
-        object.__setattr__(self, "arc_half_width", _num(o, "arc_half_width", self.arc_half_width, positive=True))
-        object.__setattr__(self, "heading_offset", _num(o, "heading_offset", self.heading_offset, nonneg=True))
-
-
 SCENE_FIELDS = tuple(f.name for f in fields(Scene))
-TASK_FIELDS = tuple(f.name for f in fields(Task))
 _MERGED = {"params", "torque_limits", "init", "obs_scale"}
 
 
@@ -358,29 +261,42 @@ def _merge(base: dict, over: dict, owner: str, allowed: tuple) -> dict:
     return out
 
 
-def _build(cls, data: dict, owner: str):
-    allowed = SCENE_FIELDS if cls is Scene else TASK_FIELDS
+def _build_scene(data: dict, owner: str) -> Scene:
+    unknown = sorted(set(data) - set(SCENE_FIELDS))
+    if unknown:
+        raise UnknownFieldError(f"{owner}: unknown field(s) {unknown}; fields: {list(SCENE_FIELDS)}")
+    return Scene(**data)
+
+
+def _build_task(data: dict, owner: str) -> Task:
+    """The task's configuration: the class its registered kind names (envs/tasks/), its fields checked."""
+    record = task_record(data.get("kind", "reach"))
+    allowed = config_fields(record.name)
     unknown = sorted(set(data) - set(allowed))
     if unknown:
-        raise UnknownFieldError(f"{owner}: unknown field(s) {unknown}; fields: {list(allowed)}")
-    return cls(**data)
+        raise UnknownFieldError(f"{owner}: unknown field(s) {unknown} for task kind {record.name!r}; fields: {list(allowed)}")
+    return record.config(**data)
 
 
 def resolve(scene="ellipse", task="reach", **overrides) -> tuple[Scene, Task]:
-    """Validated (Scene, Task) from presets (names, YAML paths, dicts) and field overrides."""
+    """Validated (Scene, Task) from presets (names, YAML paths, dicts) and field overrides. A task field must
+    be one of the fields of the task's kind (its registered record's configuration, envs/tasks/)."""
     sc = _preset("scene", scene)
     tk = _preset("task", task)
+    kind = overrides.get("kind", tk.get("kind", "reach"))
+    task_fields = config_fields(task_record(kind).name)
     so = {k: v for k, v in overrides.items() if k in SCENE_FIELDS}
-    to = {k: v for k, v in overrides.items() if k in TASK_FIELDS}
+    to = {k: v for k, v in overrides.items() if k in task_fields}
     unknown = sorted(set(overrides) - set(so) - set(to))
     if unknown:
         # worded as Python's own TypeError, which tools match (TorchRL retries without 'frameskip')
         raise UnknownFieldError(f"unexpected keyword argument {unknown[0]!r}: unknown field(s) {unknown}; "
-                                f"scene fields: {list(SCENE_FIELDS)}, task fields: {list(TASK_FIELDS)}")
+                                f"scene fields: {list(SCENE_FIELDS)}, task fields ({kind}): {list(task_fields)}")
     where_s = f"scene {scene!r}" if isinstance(scene, (str, os.PathLike)) else "scene"
     where_t = f"task {task!r}" if isinstance(task, (str, os.PathLike)) else "task"
-    return (_build(Scene, _merge(sc, so, where_s, SCENE_FIELDS), where_s),
-            _build(Task, _merge(tk, to, where_t, TASK_FIELDS), where_t))
+    merged = dict(tk)
+    merged.update(to)
+    return _build_scene(_merge(sc, so, where_s, SCENE_FIELDS), where_s), _build_task(merged, where_t)
 
 
 def env_presets() -> dict:
@@ -389,4 +305,5 @@ def env_presets() -> dict:
     return data
 
 
-__all__ = ["Scene", "Task", "ConfigError", "UnknownFieldError", "resolve", "env_presets", "CONFIG_DIR", "replace"]
+__all__ = ["Scene", "Task", "ConfigError", "ConfigTypeError", "UnknownFieldError", "resolve", "env_presets", "CONFIG_DIR",
+           "replace", "TASKS"]

@@ -8,14 +8,17 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..physics.compiled import announce_compile, compiles
-from ..physics.parallel import SERIAL_BELOW
-from ..physics.scalar import impact_buffers, scalar_model
+from ..backends.cache import announce_compile
+from ..backends.choice import compiles
+from ..backends.packing import pack
+from ..backends.threads import SERIAL_BELOW
+from ..physics.scalar import scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
-from .functional import env_functions, env_params, kinetic_energy, pack
+from .functional import DISABLED, NEXT_STEP, SAME_STEP, EnvState, env_params, kinetic_energy
 from .scene import resolve
 
 MAX_IMPACTS_IN_INFO = 8
+AUTORESET_CODES = {AutoresetMode.NEXT_STEP: NEXT_STEP, AutoresetMode.SAME_STEP: SAME_STEP, AutoresetMode.DISABLED: DISABLED}
 
 
 class PennyVectorEnv(VectorEnv):
@@ -34,10 +37,11 @@ class PennyVectorEnv(VectorEnv):
     ``observation_space``          the same with a leading ``num_envs`` axis
     =============================  =========================================================
 
-    The step is PennyEnv's own step function (functional.env_step) in a loop over the envs: with
-    the numba backend one compiled call, parallel over the envs (numba ``prange``); with
-    backend="python" the same functions uncompiled (slow; for debugging). States live in one
-    (6, num_envs) float64 array.
+    The step is PennyEnv's own step function (functional.env_step) in a loop over the envs, autoreset
+    included (functional.step_env, written once for every backend): with the numba backend one compiled
+    call, parallel over the envs (numba ``prange``); with backend="python" the same functions uncompiled
+    (slow; for debugging); with backend="cuda" one kernel launch, the state resident on the GPU. States
+    live in one (6, num_envs) float64 array.
 
     Equivalence: sub-env i seeded with seed + i follows the trajectory of PennyEnv seeded with
     seed + i under the same actions, episode after episode, bitwise (the same function; tested).
@@ -74,12 +78,16 @@ class PennyVectorEnv(VectorEnv):
     ====================  =========================================================================
 
     **GPU** (``backend="cuda"``, ``device`` a CUDA device index, ``outputs`` "torch" or "numpy"): the
-    same step functions built for CUDA (physics/builder.py), one GPU thread per env, the state kept on
-    the device (envs/cuda_step.py). Observations, rewards, flags and the info's arrays come out as torch
-    tensors on the device, zero-copy (outputs="torch", the default with backend="cuda"), or as numpy
-    arrays (outputs="numpy"); actions may be device tensors (they stay there) or numpy. ``backend="auto"``
-    takes CUDA where numba-cuda finds a GPU, with numpy outputs unless outputs="torch" is asked (so code
-    written for numpy keeps working). SAME_STEP's ``final_obs`` rows are numpy. docs/gpu.md.
+    same step functions built for CUDA (backends/builder.py), one GPU thread per env, the state and the
+    autoreset on the device (backends/cuda_env.py): after warm-up a step allocates nothing, copies nothing
+    to or from the host and never synchronizes (outputs="torch"). Observations, rewards, flags and the
+    info's arrays are torch tensors on the device in buffers allocated once and used in turn by every
+    other step: a step's outputs stay valid until the step after the next (keep them longer with
+    ``.clone()``). SAME_STEP's ``final_obs`` is a device tensor masked by ``_final_obs``. A non-finite
+    action does not raise there (that would need a round trip to the host): the env is not stepped and its
+    episode ends, truncated, with ``info["limit"]`` 3 "action". outputs="numpy" copies the outputs to the
+    host (and raises on non-finite actions as the CPU does). ``backend="auto"`` takes CUDA where numba-cuda
+    finds a GPU, with numpy outputs unless outputs="torch" is asked. docs/gpu.md.
 
     Interrupted steps: a step interrupted by an exception (KeyboardInterrupt) may leave the
     envs' bookkeeping half done (stepped but not marked for autoreset); the next step() then
@@ -132,6 +140,8 @@ class PennyVectorEnv(VectorEnv):
         self._setup()
 
     def _setup(self):
+        self._arc_scratch = None  # the step's arc counts (reused: the info does not return them)
+        self._trails = None
         c = self._make_core()
         n = self.num_envs
         self.single_action_space = spaces.Box(-1.0, 1.0, (c.n_act,), np.float32)
@@ -139,33 +149,26 @@ class PennyVectorEnv(VectorEnv):
         self.single_observation_space = spaces.Box(lo, hi, dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, n)
         self.observation_space = batch_space(self.single_observation_space, n)
-        self._keys = None
-        self._episodes = np.zeros(n, dtype=np.uint64)
-        self._S = None
+        self._st = None          # the envs' functional.EnvState (numpy; on a GPU the device holds it)
         self._renderers = None
         self._true = np.ones(n, dtype=bool)
         self._in_step = False
-        self._scratch = None  # the step's post-impact states, rest flags and arc counts (reused)
 
     def __getstate__(self):
         state = self.__dict__.copy()
         for key in ("_core", "_fns", "_p", "_m", "_consts", "_gpu", "_step_envs"):
             state.pop(key)
-        state["_scratch"] = None
-        if self._gpu is not None and self._S is not None:  # the device's state travels as host arrays
-            for name, attr in (("S", "_S"), ("trig", "_trig"), ("target", "_target"), ("arc", "_arc"), ("count", "_count"),
-                               ("dist", "_d"), ("steps", "_steps"), ("time", "_t")):
-                state[attr] = self._gpu.host(name)
+        state["_arc_scratch"] = None
+        if self._gpu is not None and self._st is not None:  # the device's state travels as host arrays
+            state["_st"] = self._gpu.state_to_host()
         state["_renderers"] = None
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
         self._make_core()
-        if self._gpu is not None and self._S is not None:
-            self._gpu.upload(self._S, self._target, self._arc, self._count, self._d, self._steps, self._t)
-            self._gpu.observe(np.arange(self.num_envs), self._gpu.cuda.device_array((self.num_envs, self._core.obs_dim),
-                                                                                   np.float32))  # (the trig rows)
+        if self._gpu is not None and self._st is not None:
+            self._gpu.state_from_host(self._st)
 
     def _make_core(self):
         on_gpu = self._on_gpu()
@@ -176,19 +179,21 @@ class PennyVectorEnv(VectorEnv):
                                  "(registered tables with formulas and the open plane run on the GPU)")
             on_gpu = False
             core = self._core = Core(self.scene, self.task, backend=self.backend)
-        self._p = env_params(core)
+        self._p = env_params(core, autoreset=AUTORESET_CODES[self.autoreset_mode])
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
-        self._fns = env_functions(core.backend, self._m.kind)
         self._consts = pack(self._p, self._m, core.k)
-        # fewer envs than parallel.SERIAL_BELOW: the serial loop, called directly (parallel.locked)
-        serial = getattr(self._fns["step_envs"], "serial", None)
-        self._step_envs = serial() if serial is not None and self.num_envs < SERIAL_BELOW else self._fns["step_envs"]
         self._gpu = None
         if on_gpu:
-            from .cuda_step import CudaStep
+            from ..backends.cuda_env import DeviceStep
             outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
-            self._gpu = CudaStep(self, self._m.kind, self.device, outputs)
-        elif core.backend == "numba":
+            self._fns = core.entry_points("cuda")
+            self._gpu = DeviceStep(self, self.device, outputs)
+            return core
+        self._fns = core.entry_points()
+        # fewer envs than threads.SERIAL_BELOW: the serial loop, called directly (threads.locked)
+        serial = getattr(self._fns.step_envs, "serial", None)
+        self._step_envs = serial() if serial is not None and self.num_envs < SERIAL_BELOW else self._fns.step_envs
+        if core.backend == "numba":
             self._warm_up()
         return core
 
@@ -197,10 +202,10 @@ class PennyVectorEnv(VectorEnv):
         torch outputs asked likewise, else where numba-cuda finds a real GPU."""
         import importlib.util
 
-        from ..physics.builder import cuda_available
+        from ..backends.builder import cuda_available
         if self.backend == "cuda" or (self.backend == "auto" and (self.device is not None or self.outputs == "torch")):
             if importlib.util.find_spec("numba_cuda") is None:
-                raise ValueError("backend='cuda' needs numba-cuda: pip install 'penny-env[cuda]'")
+                raise ValueError("backend='cuda' needs numba-cuda: from a clone of penny_env, pip install -e '.[cuda]'")
             if not cuda_available():
                 raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
             return True
@@ -209,23 +214,44 @@ class PennyVectorEnv(VectorEnv):
         import numba
         return not numba.config.ENABLE_CUDASIM and cuda_available()
 
+    def _new_state(self, n):
+        """A zeroed functional.EnvState of n envs (numpy)."""
+        return EnvState(np.zeros((6, n)), np.zeros((4, n)), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n, dtype=np.int64),
+                        np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=np.uint64),
+                        np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool))
+
+    def _outputs(self, n):
+        """Fresh step outputs (functional.StepResults' arrays as a plain tuple) and impact buffers: new arrays
+        each step on the CPU, so that the caller may keep them. The impact slots are (n, K) arrays handed to
+        the loop transposed ((K, n): scalar.ImpactBuffers' layout), so each env's slots stay together; their
+        counts start at K, so the step pads every slot (functional.step_env clears what a row held)."""
+        c, K = self._core, self.max_impacts_in_info
+        final = (n if self.autoreset_mode == AutoresetMode.SAME_STEP else 0, c.obs_dim)
+        out = (np.empty((n, c.obs_dim), dtype=np.float32), np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool),
+               np.empty(n), np.empty(n, dtype=np.int8), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64),
+               np.empty(final, dtype=np.float32), np.empty(n, dtype=bool))
+        if self._arc_scratch is None or self._arc_scratch.shape[0] != n:
+            self._arc_scratch = np.empty(n, dtype=np.int64)
+        times, ends = np.empty((n, K)), np.empty((n, K), dtype=np.int8)
+        buf = (np.full(n, K, dtype=np.int64), times.T, ends.T, np.empty((0, 6, n)), np.empty((0, n), dtype=np.int8),
+               self._arc_scratch)
+        return out, buf, times, ends
+
     def _warm_up(self):
         """Load the machine code (or compile it) now rather than in the first step."""
         c = self._core
         announce_compile("vector env step", "open plane" if c.table is None else type(c.table).__name__, self._m.kind,
-                         self._fns["step_envs"].__wrapped__)
-        from ..physics.parallel import SERIAL_BELOW, serial_now
+                         self._fns.step_envs.__wrapped__)
+        from ..backends.threads import SERIAL_BELOW, serial_now
         # both loops: one penny runs on the calling thread, SERIAL_BELOW in parallel (not in a forked child)
         for n in (1,) if serial_now() else (1, SERIAL_BELOW):
-            S = np.zeros((6, n))
-            trig = np.zeros((4, n))
+            st = tuple(self._new_state(n))
             obs = np.empty((n, c.obs_dim), dtype=np.float32)
-            ints = lambda: np.zeros(n, dtype=np.int64)  # noqa: E731
-            st = (S, trig, np.zeros((2, n)), np.zeros((2, n)), ints(), np.zeros(n), ints(), np.zeros(n))
-            self._fns["observe_rows"](np.zeros(1, dtype=np.int64), st, self._consts, obs[:1])
-            out = (obs, np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n), np.zeros(n, dtype=np.int8))
-            self._fns["step_envs"](st, np.zeros((n, 2)), np.zeros(n, dtype=bool), self._consts, out,
-                                   tuple(impact_buffers(n, 1)))
+            rows = np.arange(n)
+            self._fns.reset_rows(rows, st, self._consts, obs)
+            self._fns.observe_rows(rows, st, self._consts, obs)
+            out, buf, _, _ = self._outputs(n)
+            self._fns.step_envs(st, np.zeros((n, c.n_act)), self._consts, out, buf)
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -239,7 +265,8 @@ class PennyVectorEnv(VectorEnv):
             seed = check_seed(seed, "seed", n)
         elif seed is not None:
             seed = [None if s is None else check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
-        super().reset(seed=seed if int_seed else None)
+            if len(seed) != n:
+                raise ValueError(f"seed must be an int, None or a list of {n} seeds, got {len(seed)} seeds")
         c = self._core
         mask = self._true.copy()
         states = targets = None
@@ -251,227 +278,112 @@ class PennyVectorEnv(VectorEnv):
                     raise TypeError(f"options['reset_mask'] must be a bool array, got dtype {mask.dtype}")
                 if mask.shape != (n,):
                     raise ValueError(f"options['reset_mask'] must have shape ({n},), got {mask.shape}")
-                if self._S is None and not mask.all():
+                if self._st is None and not mask.all():
                     raise ResetNeeded("the first reset must reset every env")
                 if self._in_step and not mask.all():
                     raise ResetNeeded("the previous step was interrupted: reset every env (no reset_mask)")
-        if self._keys is None:
-            self._keys = seed_keys(self.np_random.integers(0, 2**63, size=n))
+        super().reset(seed=seed if int_seed else None)
+        first = self._st is None
+        host = self._new_state(n) if first else (self._gpu.state_to_host() if self._gpu is not None else self._st)
+        keys, episodes = host.key.copy(), host.episode.copy()
+        if first:
+            keys[:] = seed_keys(self.np_random.integers(0, 2**63, size=n))
         if seed is None:
-            self._episodes[mask] += np.uint64(1) if self._S is not None else np.uint64(0)
+            episodes[mask] += 0 if first else 1
         else:
-            if int_seed:
-                seeds = [int(seed) + i for i in range(n)]
-            else:
-                seeds = list(seed)
-                if len(seeds) != n:
-                    raise ValueError(f"seed must be an int, None or a list of {n} seeds, got {len(seeds)} seeds")
+            seeds = [int(seed) + i for i in range(n)] if int_seed else list(seed)
             for i, s in enumerate(seeds):  # explicit seeding only, not the step path
-                if not mask[i]:
-                    continue
-                if s is None:
-                    self._keys[i] = seed_keys([self.np_random.integers(0, 2**63)])[0]
-                else:
-                    self._keys[i] = seed_keys([s])[0]
-                self._episodes[i] = 0
-        if self._S is None:
-            self._S = np.zeros((6, n))
-            self._target = np.zeros((2, n))
-            self._arc = np.zeros((2, n))
-            self._steps = np.zeros(n, dtype=np.int64)
-            self._count = np.zeros(n, dtype=np.int64)
-            self._t = np.zeros(n)
-            self._trig = np.zeros((4, n))  # cos/sin of theta and phi of self._S (the certificate uses them)
-            self._d = np.zeros(n)
-            self._trails = [[] for _ in range(n)] if self.render_mode else None
-        rows = self._reset_envs(mask, states, targets)
-        self._autoreset = np.zeros(n, dtype=bool)
-        self._in_step = False
+                if mask[i]:
+                    keys[i] = seed_keys([self.np_random.integers(0, 2**63) if s is None else s])[0]
+                    episodes[i] = 0
+        rows = np.flatnonzero(mask)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
+        self._in_step = False
+        if first:
+            self._trails = [[] for _ in range(n)] if self.render_mode else None
         if self._gpu is not None:
-            return self._reset_gpu(rows, K)
-        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # every row: the envs outside a reset_mask keep their state
-        self._fns["observe_rows"](np.arange(n), self._state(), self._consts, obs)
+            obs, info = self._gpu.reset(host, rows, keys, episodes, states, targets)
+            self._st = True  # (the device holds the state)
+            if self._trails is not None:
+                S = self._gpu.host("S")
+                for i in rows:
+                    self._trails[i] = [(S[X, i], S[Y, i])]
+            return obs, info
+        if first:
+            self._st = host
+        st = self._st
+        st.key[:], st.episode[:] = keys, episodes
+        st.pending[rows] = False
+        obs = np.empty((n, c.obs_dim), dtype=np.float32)
+        self._fns.reset_rows(rows, tuple(st), self._consts, obs)
+        if states is not None or targets is not None:
+            if states is not None:
+                st.S[:, rows] = states[rows].T
+            if targets is not None:
+                st.target[:, rows] = targets[rows].T
+            self._fns.observe_rows(rows, tuple(st), self._consts, obs)
+        others = np.flatnonzero(~mask)
+        if others.size:  # the envs outside a reset_mask keep their state; their observation as it is
+            self._fns.observe_rows(others, tuple(st), self._consts, obs)
+        if self._trails is not None:
+            for i in rows:
+                self._trails[i] = [(st.S[X, i], st.S[Y, i])]
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
-                          kinetic_energy(self._S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8))
+                          kinetic_energy(st.S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8),
+                          st.time.copy(), st.dist.copy(), st.count.copy())
         return obs, info
 
-    def _reset_gpu(self, rows, K):
-        """reset() on the GPU: the rows drawn on the host go to the device, every row's observation is
-        computed there; outputs as the step's (torch on the device or numpy)."""
-        from numba import cuda
-        g, n = self._gpu, self.num_envs
-        g.upload_rows(rows, self._S[:, rows], self._target[:, rows], self._arc[:, rows], self._d[rows])
-        obs = cuda.device_array((n, self._core.obs_dim), np.float32)
-        g.observe(np.arange(n), obs)
-        S = g.host("S")
-        out = g.out
-        info = self._info(out(cuda.to_device(np.zeros(n, dtype=np.int64))), out(cuda.to_device(np.full((n, K), np.nan))),
-                          out(cuda.to_device(np.zeros((n, K), dtype=np.int8))),
-                          out(cuda.to_device(kinetic_energy(S, self._p))), out(cuda.to_device(np.zeros(n, dtype=bool))),
-                          out(cuda.to_device(np.zeros(n, dtype=np.int8))))
-        return out(obs), info
-
-    def _reset_envs(self, mask, states=None, targets=None):
-        """Draw the next episode of the envs in mask (their trig and obs: observe_rows); returns their indices."""
-        idx = np.flatnonzero(mask)
-        if idx.size == 0:
-            return idx
-        c = self._core
-        S, target, arc = c.sample(self._keys[idx], self._episodes[idx])
-        if states is not None:
-            S = states[idx].T
-        if targets is not None:
-            target = targets[idx].T
-        self._S[:, idx] = S
-        self._target[:, idx] = target
-        self._arc[:, idx] = arc
-        self._steps[idx] = 0
-        self._count[idx] = 0
-        self._t[idx] = 0.0
-        self._d[idx] = c.distance(S, target)
-        if self._trails is not None:
-            for i in idx:
-                self._trails[i] = [(self._S[X, i], self._S[Y, i])]
-        return idx
-
     def step(self, actions):
-        if self._S is None:
+        if self._st is None:
             raise ResetNeeded("PennyVectorEnv.step() called before reset()")
         if self._in_step:
             raise ResetNeeded("PennyVectorEnv.step(): the previous step was interrupted (an exception such as "
                               "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         if self._gpu is not None:
-            return self._step_gpu(actions)
+            return self._gpu.step(actions)
         n = self.num_envs
         c = self._core
         a = check_actions(actions, (n, c.n_act), "actions")  # the step clips, as PennyEnv does
-        next_step = self.autoreset_mode == AutoresetMode.NEXT_STEP
-        skip = self._autoreset if next_step else np.zeros(n, dtype=bool)
-        K = self.max_impacts_in_info
-        obs = np.empty((n, c.obs_dim), dtype=np.float32)  # new arrays each step: the caller may keep them
-        rew = np.empty(n)
-        term = np.empty(n, dtype=bool)
-        trunc = np.empty(n, dtype=bool)
-        energy = np.empty(n)
-        limit = np.empty(n, dtype=np.int8)
-        # the info's impact counts, times and ends are the buffers' (new arrays each step); the post-impact
-        # states, rest flags and arc counts, which the info does not return, are reused from step to step
-        if self._scratch is None:
-            self._scratch = (np.empty((n, K, 6)), np.empty((n, K), dtype=np.int8), np.empty(n, dtype=np.int64))
-        post, rest, arc_count = self._scratch
-        buf = (np.empty(n, dtype=np.int64), np.empty((n, K)), np.empty((n, K), dtype=np.int8), post, rest,
-               arc_count)  # (scalar.ImpactBuffers' fields; step_env clears every row)
-        # from here to the autoreset flags the step's bookkeeping must run whole (class docstring)
+        out, buf, times, ends = self._outputs(n)
+        # from here to the end of the loop the step's bookkeeping must run whole (class docstring)
         self._in_step = True
-        self._step_envs(self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), buf)
-        n_imp, times, ends = buf[0], buf[1], buf[2]
-        self._extend_trails()
-        done = term | trunc
-        if next_step and skip.any():  # the envs whose episode ended at the previous step reset now
-            self._episodes[skip] += np.uint64(1)
-            rows = self._reset_envs(skip)
-            self._fns["observe_rows"](rows, self._state(), self._consts, obs)
-            energy[rows] = kinetic_energy(self._S[:, rows], self._p)
-        info = self._info(n_imp, times, ends, energy, term, limit)
-        if next_step:
-            self._autoreset = done
-        elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
-            self._end_episodes_same_step(info, obs, done, term)
+        self._step_envs(tuple(self._st), a, self._consts, out, buf)
         self._in_step = False
+        obs, rew, term, trunc, energy, limit, time, dist, count, final_obs, done = out
+        self._extend_trails()
+        info = self._info(buf[0], times, ends, energy, term, limit, time, dist, count)
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            self._final_info(info, final_obs, done, term)
         return obs, rew, term, trunc, info
 
-    def _step_gpu(self, actions):
-        """step() on the GPU (envs/cuda_step.py): the kernel steps every env; the envs whose episode ended
-        reset on the host (their rows copied to the device), as the CPU step does, in the same order."""
-        g, n, c = self._gpu, self.num_envs, self._core
-        next_step = self.autoreset_mode == AutoresetMode.NEXT_STEP
-        skip = self._autoreset if next_step else np.zeros(n, dtype=bool)
-        K = self.max_impacts_in_info
-        a = g.actions(actions, (n, c.n_act))  # checked before the step starts (nothing changes on bad input)
-        self._in_step = True
-        res, buf = g.step(a, skip, c.obs_dim, K)
-        reset_rows = np.zeros(0, dtype=np.int64)
-        if next_step and skip.any():
-            self._episodes[skip] += np.uint64(1)
-            reset_rows = self._reset_envs(skip)
-            g.upload_rows(reset_rows, self._S[:, reset_rows], self._target[:, reset_rows], self._arc[:, reset_rows],
-                          self._d[reset_rows])
-            g.observe(reset_rows, res.obs)
-        term, trunc = res.terminated.copy_to_host(), res.truncated.copy_to_host()
-        done = term | trunc
-        final = None
-        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
-            rows = np.flatnonzero(done)
-            final = (rows, res.obs.copy_to_host()[rows])
-            self._episodes[done] += np.uint64(1)
-            reset_rows = self._reset_envs(done)
-            g.upload_rows(reset_rows, self._S[:, reset_rows], self._target[:, reset_rows], self._arc[:, reset_rows],
-                          self._d[reset_rows])
-            g.observe(reset_rows, res.obs)
-        if self._trails is not None:
-            self._S = g.host("S")
-            self._extend_trails()
-        out = g.out
-        energy = out(res.kinetic_energy)
-        if reset_rows.size:  # the reset envs' energy (the kernel left their rows)
-            energy[reset_rows] = energy.new_tensor(kinetic_energy(self._S[:, reset_rows], self._p)) \
-                if hasattr(energy, "new_tensor") else kinetic_energy(self._S[:, reset_rows], self._p)
-        term_out = out(res.terminated)
-        info = self._info(out(buf.count), out(buf.time), out(buf.end), energy, term_out, out(res.limit))
-        if next_step:
-            self._autoreset = done
-        elif final is not None:
-            rows, last = final
-            final_obs, final_info = np.empty(n, dtype=object), np.empty(n, dtype=object)
-            for j, i in enumerate(rows):
-                final_obs[i] = last[j]
-                final_info[i] = {"is_success": bool(term[i])}
-            info["final_obs"], info["_final_obs"] = final_obs, done.copy()
-            info["final_info"], info["_final_info"] = final_info, done.copy()
-        self._in_step = False
-        return out(res.obs), out(res.reward), term_out, out(res.truncated), info
-
-    def _end_episodes_same_step(self, info, obs, done, terminated):
-        """SAME_STEP autoreset: the last obs and info of the envs whose episode ended go to
-        info["final_obs"] / info["final_info"], then those envs reset."""
+    def _final_info(self, info, final_obs, done, terminated):
+        """SAME_STEP autoreset: the last obs and info of the envs whose episode ended (SB3-style object arrays
+        of rows) in info["final_obs"] / info["final_info"]."""
         n = self.num_envs
-        rows = np.flatnonzero(done)
-        final_obs = np.empty(n, dtype=object)
-        final_info = np.empty(n, dtype=object)
-        for i in rows:  # only the envs whose episode ended (SB3-style final observations)
-            final_obs[i] = obs[i].copy()
-            final_info[i] = {"is_success": bool(terminated[i])}
-        info["final_obs"], info["_final_obs"] = final_obs, done.copy()
-        info["final_info"], info["_final_info"] = final_info, done.copy()
-        self._episodes[done] += np.uint64(1)
-        self._fns["observe_rows"](self._reset_envs(done), self._state(), self._consts, obs)
-
-    def _state(self):
-        """The envs' state arrays as the plain tuple of functional.EnvState's fields the step takes."""
-        return (self._S, self._trig, self._target, self._arc, self._count, self._d, self._steps, self._t)
+        obs_rows = np.empty(n, dtype=object)
+        info_rows = np.empty(n, dtype=object)
+        for i in np.flatnonzero(done):
+            obs_rows[i] = final_obs[i].copy()
+            info_rows[i] = {"is_success": bool(terminated[i])}
+        info["final_obs"], info["_final_obs"] = obs_rows, done.copy()
+        info["final_info"], info["_final_info"] = info_rows, done.copy()
 
     def _extend_trails(self):
         if self._trails is not None:
+            S = self._st.S if self._gpu is None else self._gpu.host("S")
             for i in range(self.num_envs):
-                self._trails[i].append((self._S[X, i], self._S[Y, i]))
+                self._trails[i].append((S[X, i], S[Y, i]))
                 del self._trails[i][:-200]
 
-    def _info(self, counts, times, ends, energy, success, limit):
+    def _info(self, counts, times, ends, energy, success, limit, time, dist, count):
         t = self._true
-        if self._gpu is not None:  # the running values live on the device
-            g = self._gpu
-            time, dist, count = (g.out(getattr(g.st, name)).clone() if g.outputs == "torch" else g.host(name)
-                                 for name in ("time", "dist", "count"))
-        else:
-            time, dist = self._t.copy(), self._d.copy()
-            count = self._count.copy() if self._core.impacts else None
         info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
                 "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": energy,
                 "_kinetic_energy": t.copy(), "time": time, "_time": t.copy(), "distance": dist,
-                "_distance": t.copy(), "is_success": success.copy() if hasattr(success, "copy") else success.clone(),
-                "_is_success": t.copy(), "limit": limit, "_limit": t.copy()}
-        if self._core.impacts:
+                "_distance": t.copy(), "is_success": success.copy() if isinstance(success, np.ndarray) else success,
+                "_is_success": t.copy(), "limit": limit,
+                "_limit": t.copy()}
+        if self._core.counts_arc:
             info["arc_impacts"] = count
             info["_arc_impacts"] = t.copy()
         return info
@@ -485,32 +397,34 @@ class PennyVectorEnv(VectorEnv):
     @property
     def states(self) -> np.ndarray:
         """(num_envs, 6) copy of the pennies' states (x, y, theta, phi, theta_dot, phi_dot), numpy."""
-        if self._S is None:
+        if self._st is None:
             raise ResetNeeded("call reset() first")
         if self._gpu is not None:
             return self._gpu.host("S").T.copy()
-        return self._S.T.copy()
+        return self._st.S.T.copy()
 
     @property
     def targets(self) -> np.ndarray:
-        if self._S is None:
+        if self._st is None:
             raise ResetNeeded("call reset() first")
         if self._gpu is not None:
             return self._gpu.host("target").T.copy()
-        return self._target.T.copy()
+        return self._st.target.T.copy()
 
     def render(self):
         """Frames of the sub-envs (a tuple of uint8 arrays) in render_mode "rgb_array"."""
         if self.render_mode is None:
             gym.logger.warn("PennyVectorEnv.render() called without render_mode='rgb_array'")
             return None
-        if self._S is None:
+        if self._st is None:
             raise ResetNeeded("PennyVectorEnv.render() called before reset()")
         from .rendering import Renderer
         if self._renderers is None:
             self._renderers = Renderer(self._core, "rgb_array", self.metadata["render_fps"])
         r = self._renderers
-        return tuple(r.frame(tuple(self._S[:, i]), tuple(self._target[:, i]), self._trails[i], tuple(self._arc[:, i]))
+        S, target, arc = (self._st.S, self._st.target, self._st.arc) if self._gpu is None else \
+            (self._gpu.host("S"), self._gpu.host("target"), self._gpu.host("arc"))
+        return tuple(r.frame(tuple(S[:, i]), tuple(target[:, i]), self._trails[i], tuple(arc[:, i]))
                      for i in range(self.num_envs))
 
     def close_extras(self, **kwargs):

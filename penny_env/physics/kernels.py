@@ -34,7 +34,10 @@ def _where(cond, a, b):
 ARRAY = math_namespace("penny_env_array_math", False, sin=np.sin, cos=np.cos, sqrt=np.sqrt, abs=np.abs,
                        minimum=np.minimum, maximum=np.maximum, where=np.where, inf=np.inf)
 SCALAR = math_namespace("penny_env_scalar_math", True, sin=math.sin, cos=math.cos, sqrt=math.sqrt, abs=abs,
-                        minimum=min, maximum=max, where=_where, inf=math.inf)
+                        minimum=min, maximum=max, where=_where, inf=math.inf, pi=math.pi,
+                        # 64-bit integers of the counter-based draws (envs/draws.py): Python ints, masked there
+                        u64=int, to_float=float, ONE=1, GOLDEN=0x9E3779B97F4A7C15, M1=0xBF58476D1CE4E5B9,
+                        M2=0x94D049BB133111EB, MASK=(1 << 64) - 1, U11=11, U27=27, U30=30, U31=31)
 
 # j1(x) = sum_k (-1)^k (2k+2) x^(2k+1) / (2k+3)!, truncated where terms drop below 1e-19 for |x| < 1
 _J1_COEFFS = []

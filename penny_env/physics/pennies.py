@@ -2,7 +2,7 @@
 
 One event loop exists: scalar.run_interval (scalar.advance_into, resumed by
 scalar.advance_through_into) for one penny in plain floats, writing into fixed-capacity buffers. Here
-it runs over a batch through physics/compiled.py's advance_batch, built by physics/builder.py:
+it runs over a batch through batch_loops.advance_batch, built by the backends (penny_env/backends/):
 compiled and in parallel over the pennies (backend "numba") or as plain Python (backend "python": the
 readable reference, for debugging and tests). Both give bitwise the same results (tests/test_compiled.py)."""
 from __future__ import annotations
@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import CompiledBatch, choose_backend, flat_log
 from .scalar import PINNED
 
 # rounds of a first-impact search resumed after its step budget (settings.max_search_steps) is spent
@@ -60,6 +59,8 @@ def advance_pennies(S, acc1, acc2, dt, params, table, law, settings, stop_after=
     stop_after (a per-call impact count at which a penny stops right after its impact). backend
     "python" runs the plain-Python loop penny by penny; "numba" or "auto" the compiled batch (the same
     functions, physics/builder.py)."""
+    from ..backends.batch import CompiledBatch, flat_log
+    from ..backends.choice import choose_backend
     S, n, acc1, acc2, dts = _columns(S, acc1, acc2, dt)
     target = "python"
     if backend != "python" and choose_backend(backend, params, table, law, settings, python="python") == "numba":
@@ -77,6 +78,8 @@ def advance_pennies(S, acc1, acc2, dt, params, table, law, settings, stop_after=
 def first_impacts(S, acc1, acc2, horizon, params, table, settings, backend="python"):
     """(t_hit (N,), end (N,) int8) of the first impact within horizon ((N,) array) for each column of
     S: scalar.first_impact_resumed (inf and 0 where none is found)."""
+    from ..backends.batch import CompiledBatch
+    from ..backends.choice import choose_backend
     from .laws import ImpactLaw
     S, n, acc1, acc2, horizon = _columns(S, acc1, acc2, horizon)
     law = ImpactLaw("elastic", 1.0)  # the search does not depend on the law

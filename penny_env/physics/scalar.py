@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 import weakref
-from functools import lru_cache
 from typing import NamedTuple
 
 from .flows import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_COUNTS, RULE_LIMITS, RULE_NODES,
@@ -72,11 +71,16 @@ class Model(NamedTuple):
     max_events: int
     kind: int            # index of the table's formulas in tables.COMPILED_FORMULAS, or OTHER
     other: int           # OTHER: the key of the table in _OTHER_TABLES
-    t0: float            # t0..t4: the table's constants (Table.constants(), zero-padded)
-    t1: float
-    t2: float
-    t3: float
-    t4: float
+    table_c0: float      # table_c0..table_c4: the table's constants (Table.constants(), zero-padded)
+    table_c1: float
+    table_c2: float
+    table_c3: float
+    table_c4: float
+
+
+def table_constants_of(m):
+    """The table's constants of Model m as the tuple its formulas take."""
+    return (m.table_c0, m.table_c1, m.table_c2, m.table_c3, m.table_c4)
 
 
 # -- the tables' formulas: wall_terms(m, x, y) -> (h, hx, hy), wall_hess(m, x, y) -> (hxx, hxy, hyy) ------
@@ -99,13 +103,43 @@ def other_hess(m, x, y):
 def wall_terms(m, x, y):
     if m.kind == OTHER:
         return other_terms(m, x, y)
-    return COMPILED_FORMULAS[m.kind][0]((m.t0, m.t1, m.t2, m.t3, m.t4), x, y)
+    return COMPILED_FORMULAS[m.kind][0](table_constants_of(m), x, y)
 
 
 def wall_hess(m, x, y):
     if m.kind == OTHER:
         return other_hess(m, x, y)
-    return COMPILED_FORMULAS[m.kind][1]((m.t0, m.t1, m.t2, m.t3, m.t4), x, y)
+    return COMPILED_FORMULAS[m.kind][1](table_constants_of(m), x, y)
+
+
+RAY_BISECTIONS = 64  # halvings of the bracket [0, 2 size] of wall_distance's bisection
+
+
+def wall_distance(m, c, s):
+    """Distance from the table's centre to its wall along the unit direction (c, s): the table's ``ray``
+    formula, else a bisection on h along the ray (Table.wall_distance's generic version, for one ray)."""
+    if m.kind == OTHER:
+        return float(_OTHER_TABLES[m.other].wall_distance(c, s))
+    ray = COMPILED_FORMULAS[m.kind][2]
+    if ray is not None:
+        return ray(table_constants_of(m), c, s)
+    return wall_distance_bisection(m, c, s)
+
+
+def wall_distance_bisection(m, c, s):
+    """wall_distance by bisection on h (the table's terms): the bracket [0, 2 size] (2 size exceeds the
+    extent's half-diagonal) halved RAY_BISECTIONS times; size = delta / contact_tol is not in the Model,
+    so the bracket grows from 1 m until its end is outside."""
+    lo, hi = 0.0, 1.0
+    while wall_terms(m, hi * c, hi * s)[0] < 0.0:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(RAY_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        if wall_terms(m, mid * c, mid * s)[0] < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 def law_terms(m, W, w, a, b, grad2):
@@ -132,14 +166,9 @@ def table_constants(table):
 
 
 def scalar_model(params, table, law, settings) -> Model:
-    """The Model of the physics objects (table None: the open plane)."""
-    try:
-        return _cached_model(params, table, law, settings)
-    except TypeError:  # an unhashable user table
-        return _build_model(params, table, law, settings)
-
-
-def _build_model(params, table, law, settings):
+    """The Model of the physics objects (table None: the open plane). Built anew on every call (a few
+    microseconds): a cache keyed on the objects would hand one user table, or a law re-registered under
+    the same name, another's constants."""
     if table is None:
         kind, consts, G, L, third, D3, jump, delta = OTHER, (0.0,) * N_CONSTANTS, 0.0, 0.0, False, 0.0, 0.0, 0.0
         other = 0
@@ -155,8 +184,6 @@ def _build_model(params, table, law, settings):
                  float(law.e), law_index(law.update), law.conserves_energy, int(settings.max_search_steps), int(settings.zeno_impacts),
                  float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
-
-_cached_model = lru_cache(maxsize=64)(_build_model)
 
 
 # -- flow ------------------------------------------------------------------------------------------
@@ -381,14 +408,16 @@ WHOLE_WALL = 2.0, -2.0      # cos half-width values: none of the wall / all of i
 
 
 class ImpactBuffers(NamedTuple):
-    """Where the event loop writes the impacts of N pennies over one call: fixed capacity K per penny,
-    owned by the caller (:func:`impact_buffers`). Row i belongs to penny i.
+    """Where the event loop writes the impacts of N pennies over one call: fixed capacity per penny, owned by
+    the caller (:func:`impact_buffers`). Column i belongs to penny i; the slots are the first axis, so that
+    neighbouring pennies (a GPU's neighbouring threads) write neighbouring addresses.
 
     count (N,) int64      the impacts of the call, all of them (also those past the capacity)
-    time (N, K)           their times since the interval's start [s]
-    end (N, K) int8       +1 front, -1 back
-    post (N, K, 6)        the state right after each impact
-    rest (N, K) int8      0, REST (the impact ended an accumulation: the penny is at rest) or PINNED (at
+    time (K, N)           their times since the interval's start [s]
+    end (K, N) int8       +1 front, -1 back
+    post (Kp, 6, N)       the state right after each impact (Kp = K, or 0 where the caller does not read
+                          them: the vector env's step)
+    rest (Kp, N) int8     0, REST (the impact ended an accumulation: the penny is at rest) or PINNED (at
                           rest and held against the wall by the controls until the interval ends)
     arc_count (N,) int64  impacts whose contact point lies on the marked arc (record_impact's ``arc``)
 
@@ -404,23 +433,24 @@ class ImpactBuffers(NamedTuple):
     arc_count: object
 
 
-def impact_buffers(n, capacity, empty=False) -> ImpactBuffers:
-    """ImpactBuffers (numpy) for n pennies with ``capacity`` slots each, zeroed (empty: uninitialised, for
-    a caller whose loop clears every row it uses, as the vector env's step does)."""
+def impact_buffers(n, capacity, empty=False, states=True) -> ImpactBuffers:
+    """ImpactBuffers (numpy) for n pennies with ``capacity`` slots each, zeroed (empty: uninitialised, for a
+    caller that clears what it reads); states False: no slots for the post-impact states and rest flags."""
     import numpy as np
     new = np.empty if empty else np.zeros
-    return ImpactBuffers(np.zeros(n, dtype=np.int64), new((n, capacity)), new((n, capacity), dtype=np.int8),
-                         new((n, capacity, 6)), new((n, capacity), dtype=np.int8), np.zeros(n, dtype=np.int64))
+    kp = capacity if states else 0
+    return ImpactBuffers(np.zeros(n, dtype=np.int64), new((capacity, n)), new((capacity, n), dtype=np.int8),
+                         new((kp, 6, n)), new((kp, n), dtype=np.int8), np.zeros(n, dtype=np.int64))
 
 
 def overflowed(buf):
     """The overflow flags of ImpactBuffers (N,): more impacts than the slots hold."""
-    return buf.count > buf.time.shape[1]
+    return buf.count > buf.time.shape[0]
 
 
 def clear_row(buf, row):
-    """Row ``row`` of buf emptied (count and arc count 0) before a call writes into it. (By position: it
-    is inlined into parallel loops, where numba loses writes made through a NamedTuple's attribute.)"""
+    """Penny ``row``'s count and arc count set to 0 before a call writes its impacts. (By position: it is
+    inlined into parallel loops, where numba loses writes made through a NamedTuple's attribute.)"""
     count = buf[0]
     arc_count = buf[5]
     count[row] = 0
@@ -428,16 +458,17 @@ def clear_row(buf, row):
 
 
 def record_impact(buf, row, t, end, post, rest, arc, m):
-    """Impact (t, end, post, rest flag) appended to row ``row`` of buf (stored while a slot is free,
+    """Impact (t, end, post, rest flag) appended to penny ``row``'s slots of buf (stored while a slot is free,
     counted always). arc = (cos b, sin b, cos h): the impact counts in buf.arc_count when its contact
     point p (the end on the wall) satisfies p . (cos b, sin b) >= cos h |p| (cos h = 2: no arc marked)."""
     j = buf.count[row]
-    if j < buf.time.shape[1]:
-        buf.time[row, j] = t
-        buf.end[row, j] = end
-        buf.rest[row, j] = rest
+    if j < buf.time.shape[0]:
+        buf.time[j, row] = t
+        buf.end[j, row] = end
+    if j < buf.post.shape[0]:
+        buf.rest[j, row] = rest
         for r in range(6):
-            buf.post[row, j, r] = post[r]
+            buf.post[j, r, row] = post[r]
     buf.count[row] = j + 1
     if arc[2] < 1.5:
         sR = end * m.R
@@ -546,11 +577,11 @@ def run_interval(s, c_ph, s_ph, acc1, acc2, dt, m, plane, resume, stop_after, bu
 
 # -- lists of impacts, in plain Python (tests, analysis): the loop above with a buffer ---------------------
 def impacts_of(buf, row):
-    """(impacts, rests) of row ``row`` of buf as lists: (time, end, post_state) and (time, pinned)."""
-    n = min(int(buf.count[row]), buf.time.shape[1])
-    impacts = [(float(buf.time[row, j]), int(buf.end[row, j]), tuple(float(v) for v in buf.post[row, j]))
+    """(impacts, rests) of penny ``row`` of buf as lists: (time, end, post_state) and (time, pinned)."""
+    n = min(int(buf.count[row]), buf.time.shape[0])
+    impacts = [(float(buf.time[j, row]), int(buf.end[j, row]), tuple(float(v) for v in buf.post[j, :, row]))
                for j in range(n)]
-    rests = [(float(buf.time[row, j]), bool(buf.rest[row, j] == PINNED)) for j in range(n) if buf.rest[row, j]]
+    rests = [(float(buf.time[j, row]), bool(buf.rest[j, row] == PINNED)) for j in range(n) if buf.rest[j, row]]
     return impacts, rests
 
 

@@ -51,6 +51,7 @@ class Table:
     extent: tuple[float, float, float, float]
     terms = None  # numba-compatible (c, x, y) -> (h, hx, hy), or None (the table's methods are called)
     hess = None   # numba-compatible (c, x, y) -> (hxx, hxy, hyy)
+    ray = None    # numba-compatible (c, cos, sin) -> distance from the centre to the wall (optional)
 
     def h(self, x, y):  # pragma: no cover - abstract
         raise NotImplementedError
@@ -93,13 +94,25 @@ class Table:
         return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self._fields().items())})"
 
     def _fields(self) -> dict:
-        return {}
+        """The numbers that define the table (its repr, equality and hash). By default every public
+        instance attribute, so that two tables of a class that does not name its parameters are equal
+        only when everything they hold is; the built-in tables name their constructor's arguments."""
+        return {k: _hashable(v) for k, v in sorted(vars(self).items()) if not k.startswith("_")}
 
     def __eq__(self, other) -> bool:
         return type(self) is type(other) and self._fields() == other._fields()
 
     def __hash__(self) -> int:
-        return hash((type(self).__name__, tuple(self._fields().items())))
+        return hash((type(self).__qualname__, tuple(self._fields().items())))
+
+
+def _hashable(v):
+    """v with lists and arrays as tuples (a table's attributes, for its equality and hash)."""
+    if isinstance(v, np.ndarray):
+        return (v.shape,) + tuple(v.ravel().tolist())
+    if isinstance(v, (list, tuple)):
+        return tuple(_hashable(x) for x in v)
+    return v
 
 
 LENGTH_RANGE = (1e-100, 1e100)  # table numbers outside it overflow or underflow in 1/a^2, a^2, ... (no ZeroDivisionError)
@@ -120,12 +133,14 @@ def length(owner: str, name: str, value, allow_zero: bool = False) -> float:
 
 # -- the registry ------------------------------------------------------------------------------------
 TABLE_KINDS: dict = {}      # name -> class (the "kind" of a table spec)
-COMPILED_FORMULAS: list = []  # (terms, hess) of the compiled tables; Model.kind indexes it
+COMPILED_FORMULAS: list = []  # (terms, hess, ray or None) of the compiled tables; Model.kind indexes it
 
 
 def register_table(name: str, cls) -> None:
     """Make ``make_table({"kind": name, ...})`` (and scene YAML ``table: {kind: name, ...}``) build
-    ``cls(...)``; a class with static ``terms`` and ``hess`` also runs in the compiled event loop."""
+    ``cls(...)``; a class with static ``terms`` and ``hess`` also runs in the compiled event loop (and
+    ``ray(c, cos, sin)``, optional, gives the distance from the centre to the wall along a direction; without
+    it the compiled code bisects on terms' h)."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"register_table: name must be an identifier, got {name!r}")
     if name in ("none", "plane"):
@@ -134,13 +149,13 @@ def register_table(name: str, cls) -> None:
     if cls.terms is not None and compiled_kind(cls) < 0:
         if cls.hess is None:
             raise ValueError(f"register_table: {cls.__name__} defines terms but not hess")
-        COMPILED_FORMULAS.append((cls.terms, cls.hess))
+        COMPILED_FORMULAS.append((cls.terms, cls.hess, getattr(cls, "ray", None)))
 
 
 def compiled_kind(table_or_cls) -> int:
     """Index of the table's formulas in COMPILED_FORMULAS, or -1 (not compiled: called through its methods)."""
     terms = getattr(table_or_cls, "terms", None)
-    for k, (t, _) in enumerate(COMPILED_FORMULAS):
+    for k, (t, *_) in enumerate(COMPILED_FORMULAS):
         if t is terms:
             return k
     return -1

@@ -1,6 +1,8 @@
 """The elliptic table (the paper's) and the circle."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .base import Table, length, register_table
@@ -18,6 +20,12 @@ def ellipse_hess(c, x, y):
     return c2 * c[0], 0.0, c2 * c[1]
 
 
+def ellipse_ray(c, cs, sn):
+    """Distance from the centre to the wall along the unit direction (cs, sn) (Ellipse.wall_distance's
+    arithmetic, for one direction)."""
+    return 1.0 / math.sqrt(cs * cs * c[0] + sn * sn * c[1])
+
+
 class Ellipse(Table):
     """Elliptic table x^2/a^2 + y^2/b^2 < 1 (semi-axes a along x, b along y), the paper's table.
 
@@ -26,6 +34,7 @@ class Ellipse(Table):
     name = "ellipse"
     terms = staticmethod(ellipse_terms)
     hess = staticmethod(ellipse_hess)
+    ray = staticmethod(ellipse_ray)
     third_derivative_bound = 0.0
     hessian_jump = 0.0
 

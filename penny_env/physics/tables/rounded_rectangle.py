@@ -1,6 +1,8 @@
 """The rounded rectangle: a width x height rectangle whose corners are quarter circles of a radius."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .base import Table, length, register_table
@@ -21,6 +23,21 @@ def rounded_rectangle_hess(c, x, y):
             (inv if y - min(max(y, -ay), ay) != 0.0 else 0.0))
 
 
+def rounded_rectangle_ray(c, cs, sn):
+    """Distance from the centre to the wall along the unit direction (cs, sn) (RoundedRectangle.wall_distance's
+    arithmetic, for one direction): a vertical side, a horizontal side, or a corner."""
+    ax, ay, r = c[0], c[1], c[2]
+    ac, as_ = abs(cs), abs(sn)
+    side_x = (ax + r) / ac if ac != 0.0 else math.inf
+    if side_x * as_ <= ay:
+        return side_x
+    side_y = (ay + r) / as_ if as_ != 0.0 else math.inf
+    if side_y * ac <= ax:
+        return side_y
+    cross = ax * as_ - ay * ac
+    return ax * ac + ay * as_ + math.sqrt(max(r * r - cross * cross, 0.0))
+
+
 class RoundedRectangle(Table):
     """Rectangle |x| < width/2, |y| < height/2 with its corners rounded to quarter circles of the
     given radius (0 < radius <= min(width, height)/2; the largest radius is a stadium).
@@ -35,6 +52,7 @@ class RoundedRectangle(Table):
     name = "rounded_rectangle"
     terms = staticmethod(rounded_rectangle_terms)
     hess = staticmethod(rounded_rectangle_hess)
+    ray = staticmethod(rounded_rectangle_ray)
     third_derivative_bound = 0.0
 
     def __init__(self, width: float, height: float, radius: float):

@@ -1,6 +1,8 @@
 """The Bunimovich stadium."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .base import Table, length as _length, register_table
@@ -18,6 +20,16 @@ def stadium_hess(c, x, y):
     return (inv if x - min(max(x, -half), half) != 0.0 else 0.0), 0.0, inv
 
 
+def stadium_ray(c, cs, sn):
+    """Distance from the centre to the wall along the unit direction (cs, sn) (Stadium.wall_distance's
+    arithmetic, for one direction): a straight side where that one is hit, else a cap."""
+    half, r = c[0], c[1]
+    side = r / abs(sn) if sn != 0.0 else math.inf
+    if side * abs(cs) <= half:
+        return side
+    return abs(cs) * half + math.sqrt(r * r - half * half * sn * sn)
+
+
 class Stadium(Table):
     """Bunimovich stadium: two half-discs of the given radius joined by straight sides of the
     given length, parallel to the x axis and centred on the origin (length 0 is a circle).
@@ -28,6 +40,7 @@ class Stadium(Table):
     name = "stadium"
     terms = staticmethod(stadium_terms)
     hess = staticmethod(stadium_hess)
+    ray = staticmethod(stadium_ray)
     third_derivative_bound = 0.0
 
     def __init__(self, radius: float, length: float):

@@ -1,0 +1,478 @@
+"""One builder for the three targets of the package's plain-Python functions.
+
+The physics (physics/kernels.py, flows.py, scalar.py, the tables' formulas, the laws), the env step's stages
+(envs/functional.py) and the tasks (envs/tasks/) are written once, as plain Python on floats and tuples. A
+:class:`Builder` makes copies of those very functions for one target, whose globals are one shared namespace
+(a function calls its callees' copies):
+
+* ``"python"``: plain copies (no compiler): the readable reference, for debugging and for the tests that
+  compare the compiled targets with it;
+* ``"cpu"``: numba copies (the math namespace ``SCALAR`` becomes backends/numba_math.py), cached on disk
+  where allowed (backends/cache.py), the loops over pennies compiled with ``parallel=True`` (numba
+  ``prange``) plus a serial copy (backends/threads.py);
+* ``"cuda"``: numba-cuda device functions (``SCALAR`` becomes backends/cuda_math.py), and each loop over
+  pennies a kernel with one thread per penny.
+
+A loop over pennies is a plain function whose body is one call of a per-penny function with the index
+first, ``for i in prange(N): body(i, a, b, ...)`` (backends/physics.advance_batch, functional.step_envs). For
+CUDA, :meth:`Builder.kernel` generates the kernel ``i = cuda.grid(1); if i < N: body(i, a, b, ...)``. On the
+CPU the body's text is placed in the loop (:func:`hoisted_source`), with its extractions of arrays from the
+record arguments (``S = st[0]``) moved before the loop (numba counts references to every array a statement
+extracts, two atomic operations per array per penny), and the calls of the step and the event loop's driver
+are pasted in at the source level (:func:`inline_source`). A loop that does not fit that pattern raises
+:class:`BuildError` naming the loop and the reason: a silent fallback would run the slow path unnoticed.
+Generated source is written to real files (backends/generated.py), so tracebacks point at real lines.
+
+Every copy's name carries the table variant and a hash of all the sources it inlines (backends/cache.py),
+so numba's disk cache can never serve stale machine code.
+"""
+from __future__ import annotations
+
+import builtins
+import functools
+import inspect
+import types
+
+from . import generated
+
+TARGETS = ("python", "cpu", "cuda")
+CUDA_THREADS = 128  # threads per block of the kernels (one penny per thread)
+
+
+class BuildError(RuntimeError):
+    """A loop or function that the builder cannot compile the way it must (the message says which and why)."""
+
+
+def check_target(target) -> str:
+    if not isinstance(target, str):
+        raise TypeError(f"target must be a str, one of {TARGETS}, got {type(target).__name__}")
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
+    return target
+
+
+@functools.lru_cache(maxsize=None)
+def cuda_available() -> bool:
+    """numba-cuda is installed and a CUDA device (or numba's CUDA simulator) is usable (checked once). Without
+    the simulator, a machine whose CUDA driver library does not load has no GPU: answered without importing
+    numba.cuda (about 1.5 s)."""
+    import importlib.util
+    import os
+    if importlib.util.find_spec("numba_cuda") is None:
+        return False
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") != "1":
+        import ctypes
+        try:
+            ctypes.CDLL("libcuda.so.1" if os.name != "nt" else "nvcuda.dll")
+        except OSError:
+            return False
+    try:
+        from numba import cuda
+    except ImportError:
+        return False
+    try:
+        return bool(cuda.is_available())
+    except Exception:  # noqa: BLE001 (a broken driver means no GPU for us)
+        return False
+
+
+def jit_copy(f, namespace, jit=None, variant="", math=None):
+    """``jit`` (None: no compiler, the plain copy) of a copy of function f whose globals are ``namespace``;
+    default arguments that are modules (``xp``) become ``math``. ``variant`` goes into the copy's qualified
+    name: numba's on-disk cache files are named after it, and copies compiled against different tables
+    must not share them."""
+    defaults = tuple(math if isinstance(d, types.ModuleType) and math is not None else d for d in (f.__defaults__ or ()))
+    copy = types.FunctionType(f.__code__, namespace, f.__name__, defaults, f.__closure__)
+    copy.__module__ = f.__module__
+    copy.__qualname__ = f"{f.__qualname__}__{variant}" if variant else f.__qualname__
+    copy.__doc__ = f.__doc__
+    return copy if jit is None else jit(copy)
+
+
+class Builder:
+    """Copies of plain-Python functions for one target, sharing one namespace.
+
+    ``Builder(target, variant, cache)``: variant names the copies (a table variant and a sources digest,
+    backends/cache.py); cache: CPU copies may go to numba's disk cache. :meth:`add` puts a module's names (or
+    any mapping) into the namespace, :meth:`copy` makes a function's copy for the target (stored under the
+    function's name), :meth:`loop` the loop over pennies, :meth:`kernel` its CUDA kernel."""
+
+    def __init__(self, target: str, variant: str, cache: bool = False):
+        self.target = check_target(target)
+        self.variant = variant
+        self.cache = bool(cache) and target == "cpu"
+        self.namespace: dict = {"__builtins__": builtins, "prange": range}
+        self.origin: dict = {}  # name -> the plain function whose copy the namespace holds under that name
+        self._modules: dict = {}  # module name -> the namespace of its functions' copies (copy_foreign)
+        self._jit = self._inline = None  # the python target copies without compiling
+        if target == "cpu":
+            import numba
+
+            from . import numba_math
+            self.math = numba_math
+            self._jit = numba.njit(cache=self.cache)
+            self._inline = numba.njit(cache=self.cache, inline="always")
+            self._parallel = numba.njit(cache=self.cache, parallel=True)
+            self.namespace["prange"] = numba.prange
+        elif target == "cuda":
+            from numba import cuda
+
+            from . import cuda_math
+            self.math = cuda_math.namespace()
+            self._jit = self._inline = cuda.jit(device=True)
+            self.namespace["cuda"] = cuda
+        else:
+            from ..physics.kernels import SCALAR
+            self.math = SCALAR
+
+    # -- the namespace ---------------------------------------------------------------------------
+    def add(self, source) -> None:
+        """Every public and private name of a module (or a mapping), dunders excepted; the math
+        namespaces SCALAR / ARRAY / XP are the target's."""
+        items = vars(source).items() if isinstance(source, types.ModuleType) else dict(source).items()
+        self.namespace.update({k: v for k, v in items if not k.startswith("__") and k != "prange"})
+        for name in ("SCALAR", "ARRAY", "XP"):
+            if name in self.namespace:
+                self.namespace[name] = self.math
+
+    def copy(self, f, *, inline=False, jit=None, suffix="", name=None, replaces=None):
+        """The target's copy of plain function f with this build's namespace as its globals, stored in the
+        namespace under ``name`` (default f's name). inline: numba-inlined into its callers (CPU; device
+        functions are inlined by the CUDA compiler anyway). jit: another numba decorator. replaces: the plain
+        function this copy stands for (a table's formula in place of the dispatch over tables)."""
+        compiler = jit or (self._inline if inline else self._jit)
+        out = jit_copy(f, self.namespace, compiler, self.variant + suffix, math=self.math)
+        self.namespace[name or f.__name__] = out
+        self.origin[name or f.__name__] = replaces or f
+        return out
+
+    def copy_foreign(self, f, name):
+        """A copy of f, a function of another module (a task's stage, maybe a user's), stored in the namespace
+        under ``name``. Its globals are its own module's, with three changes: penny_env's functions that this
+        build copied (the physics, the draws) are the build's copies; the module's other plain functions are
+        copied alike (so its helpers compile with it); the math namespaces are the target's. A function
+        imported from another module of the same top-level package gets that module's namespace."""
+        out = self._module_namespace(f.__module__)[f.__name__]
+        self.namespace[name] = out
+        return out
+
+    def _module_namespace(self, module_name):
+        import sys
+        if module_name in self._modules:
+            return self._modules[module_name]
+        ns = {"__builtins__": builtins}
+        self._modules[module_name] = ns
+        package = module_name.split(".")[0]
+        for k, v in vars(sys.modules[module_name]).items():
+            if k.startswith("__"):
+                continue
+            if k in ("SCALAR", "ARRAY", "XP"):
+                ns[k] = self.math
+            elif isinstance(v, types.FunctionType) and self.origin.get(v.__name__) is v:
+                ns[k] = self.namespace[v.__name__]
+            elif isinstance(v, types.FunctionType) and v.__module__ == module_name:
+                ns[k] = jit_copy(v, ns, self._jit, self.variant, math=self.math)
+            elif isinstance(v, types.FunctionType) and v.__module__.split(".")[0] == package and v.__module__ in sys.modules:
+                ns[k] = self._module_namespace(v.__module__)[v.__name__]
+            else:
+                ns[k] = v
+        return ns
+
+    def copies(self, functions, **kw) -> None:
+        for f in functions:
+            self.copy(f, **kw)
+
+    def loop(self, f, entry=None, count=None, inline=()):
+        """The loop over pennies f for the target: CPU, parallel (``prange``) with a serial copy for small
+        batches and forked children, under threads.locked, its body in place (:func:`hoisted_loop`);
+        CUDA, :meth:`kernel` of f's body; python, the plain copy. entry: a plain function that unpacks its
+        arguments and calls f (the loop is then called through the entry's copy, bound to the parallel or
+        the serial loop); count(args): the pennies of a call (default: the first argument's last axis);
+        inline: plain functions whose calls in the body the CPU loop pastes in (:func:`inline_source`)."""
+        if self.target == "cuda":
+            return self.kernel(f)
+        if self.target == "python":
+            self.copy(f)
+            return self.copy(entry) if entry is not None else self.namespace[f.__name__]
+        from . import threads
+        hoisted = hoisted_loop(f, self.namespace, tuple(inline))
+        fast = self.copy(hoisted, jit=self._parallel, name=f.__name__)
+        if entry is not None:
+            fast = self.copy(entry)
+
+        def serial():
+            ns = dict(self.namespace)
+            loop = jit_copy(hoisted, ns, self._jit, f"{self.variant}_serial", math=self.math)
+            if entry is None:
+                return loop
+            ns[f.__name__] = loop
+            return jit_copy(entry, ns, self._jit, f"{self.variant}_serial", math=self.math)
+        return threads.locked(fast, serial, count)
+
+    def kernel(self, loop, max_registers=None):
+        """The CUDA kernel of a loop over pennies: ``loop`` is ``for i in prange(COUNT): BODY(i, args)``
+        (its source is read for COUNT and BODY); the kernel runs BODY(i, args) in thread i < COUNT, its
+        source generated into a real file (backends/generated.py). Returns a :class:`CudaLoop`."""
+        from numba import cuda
+        body, count = loop_parts(loop)
+        params = list(inspect.signature(loop).parameters)
+        args = ", ".join(params)
+        name = f"{loop.__name__}_kernel"
+        source = (f'"""Generated by penny_env.backends.builder.Builder.kernel from {loop.__module__}.{loop.__qualname__}."""\n\n\n'
+                  f"def {name}({args}):\n    i = cuda.grid(1)\n    if i < {count}:\n        {body}(i, {args})\n\n\n"
+                  f"def {loop.__name__}_count({args}):\n    return {count}\n")
+        scope = generated.define(name, source, dict(self.namespace), loop.__module__)
+        options = {} if max_registers is None else {"max_registers": int(max_registers)}
+        return CudaLoop(cuda.jit(**options)(scope[name]), scope[f"{loop.__name__}_count"], loop.__name__, source)
+
+
+class CudaLoop:
+    """A loop over pennies compiled as a CUDA kernel (:meth:`Builder.kernel`), one thread per penny.
+
+    Called like the loop, with device arrays (or objects with __cuda_array_interface__), on numba's default
+    stream or ``stream=``. :meth:`prepare` binds fixed arguments once: the step of the vector env launches
+    the same buffers every time, so its host work per step is one launch (:class:`PreparedLaunch`)."""
+
+    def __init__(self, kernel, count_of, name, source):
+        self.kernel = kernel
+        self.count_of = count_of
+        self.__name__ = name
+        self.source = source
+
+    @staticmethod
+    def config(n):
+        threads = min(CUDA_THREADS, 32 * ((n + 31) // 32))  # (a small batch: one or a few warps)
+        return (n + threads - 1) // threads, threads
+
+    def __call__(self, *args, stream=0):
+        n = int(self.count_of(*args))
+        if n > 0:
+            blocks, threads = self.config(n)
+            self.kernel[blocks, threads, stream](*args)
+
+    def prepare(self, *args):
+        """A :class:`PreparedLaunch` of this kernel on ``args`` (compiled now if it was not)."""
+        return PreparedLaunch(self, args)
+
+
+class PreparedLaunch:
+    """One kernel launch with its arguments marshalled once: ``launch(stream)`` runs the kernel on the
+    arguments given to :meth:`CudaLoop.prepare` (numba's dispatcher would type, look up and flatten every
+    argument on every call: about 40 arrays, a large part of a small step's time). Where numba-cuda's
+    internals are not as expected (another version, or its simulator), it launches through the dispatcher
+    (``fast`` False), with the same results."""
+
+    def __init__(self, loop, args):
+        self.loop = loop
+        self.args = args
+        n = int(loop.count_of(*args))
+        self.n = n
+        self.blocks, self.threads = loop.config(max(n, 1))
+        self.fast = False
+        try:
+            self._marshal()
+            self.fast = True
+        except Exception:  # noqa: BLE001 (private API of numba-cuda 0.30: any change means the slow path)
+            self.fast = False
+
+    def _marshal(self):
+        from numba.cuda import dispatcher as nd
+        disp = self.loop.kernel
+        if not hasattr(nd, "launch") or not hasattr(nd, "LaunchConfig"):
+            raise RuntimeError("numba-cuda without cuda.core launches")
+        argtypes = tuple(disp.typeof_pyval(a) for a in self.args)
+        kernel = disp.overloads.get(argtypes) or disp.compile(argtypes)
+        kernelargs, retr = [], []
+        for t, v in zip(kernel.argument_types, self.args):
+            kernel._prepare_args(t, v, 0, retr, kernelargs)
+        if retr:
+            raise RuntimeError("an argument needs a copy back (a host array): not a fixed launch")
+        key = "is_cooperative" if getattr(nd, "CUDA_CORE_GE_1_0", False) else "cooperative_launch"
+        self._config = nd.LaunchConfig(grid=self.blocks, block=self.threads, shmem_size=0, **{key: False})
+        self._cukernel = kernel._codelibrary.get_cufunc().kernel
+        self._kernelargs = kernelargs
+        self._launch = nd.launch
+        self.registers = kernel.get_regs_per_thread() if hasattr(kernel, "get_regs_per_thread") else None
+
+    def launch(self, stream=0):
+        if self.n == 0:
+            return
+        if self.fast:
+            self._launch(stream, self._config, self._cukernel, *self._kernelargs)
+        else:
+            self.loop.kernel[self.blocks, self.threads, stream](*self.args)
+
+
+def hoisted_loop(loop, namespace, inline=()):
+    """The CPU version of a loop over pennies (``for i in prange(N): body(i, args)``, body found in
+    ``namespace``): the body's statements in the loop, its extractions moved before it, the calls of the
+    functions ``inline`` pasted in (:func:`hoisted_source`), defined from a generated file
+    (backends/generated.py). BuildError where the body does not allow it."""
+    name = loop_parts(loop)[0]
+    body = namespace.get(name)
+    body = getattr(body, "py_func", body)
+    if not isinstance(body, types.FunctionType):
+        raise BuildError(f"{loop.__name__}: its body {name!r} is not a plain function in the build's namespace")
+    source = hoisted_source(loop, body, inline)
+    header = f'"""Generated by penny_env.backends.builder.hoisted_source from {loop.__module__}.{loop.__qualname__}."""\n\n\n'
+    scope = generated.define(f"{loop.__name__}_cpu", header + source, {}, loop.__module__)
+    out = scope[loop.__name__]
+    out.__module__ = loop.__module__
+    out.__qualname__ = loop.__qualname__
+    out.source = source
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def hoisted_source(loop, body, inline=()) -> str:
+    """Source of ``loop`` (``for i in prange(COUNT): body(i, <the loop's arguments>)``) with the body's
+    statements in place of the call, and the body's top-level statements ``NAME = ARG[INTEGER]`` (an
+    array taken from a record argument, NAME assigned nowhere else) before the loop; the calls of the
+    functions ``inline`` pasted in (:func:`inline_source`). BuildError, naming the reason, where the body
+    cannot be placed in a loop as it is: its parameters are not (index, <the loop's>), it returns, it
+    nests a function, or it assigns a name the loop takes."""
+    import ast
+    import textwrap
+
+    name, count = loop_parts(loop)
+    fn = ast.parse(textwrap.dedent(inspect.getsource(loop))).body[0]
+    bfn = ast.parse(textwrap.dedent(inspect.getsource(body))).body[0]
+    params = [a.arg for a in fn.args.args]
+    bparams = [a.arg for a in bfn.args.args]
+    where = f"{loop.__name__}: the body {body.__name__}"
+    if bparams[1:] != params or bfn.args.vararg or bfn.args.kwarg or bfn.args.kwonlyargs:
+        raise BuildError(f"{where} must take (index, {', '.join(params)}), got ({', '.join(bparams)})")
+    nested = (ast.Return, ast.Yield, ast.YieldFrom, ast.FunctionDef, ast.Lambda, ast.Global, ast.Nonlocal)
+    bad = [n for n in ast.walk(bfn) if n is not bfn and isinstance(n, nested)]
+    if bad:
+        raise BuildError(f"{where} has a {type(bad[0]).__name__.lower()} statement (line {bad[0].lineno} of its "
+                         "definition): a loop body runs to its end")
+    stores = [n.id for n in ast.walk(bfn) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)]
+    if set(stores) & set(bparams):
+        raise BuildError(f"{where} assigns its parameter(s) {sorted(set(stores) & set(bparams))}")
+    stmts = [s for s in bfn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+
+    def extraction(s):
+        return (isinstance(s, ast.Assign) and len(s.targets) == 1 and isinstance(s.targets[0], ast.Name)
+                and stores.count(s.targets[0].id) == 1 and isinstance(s.value, ast.Subscript)
+                and isinstance(s.value.value, ast.Name) and s.value.value.id in params
+                and isinstance(s.value.slice, ast.Constant) and type(s.value.slice.value) is int)
+    hoisted = [s for s in stmts if extraction(s)]
+    rest = [s for s in stmts if not extraction(s)]
+    if not rest:
+        raise BuildError(f"{where} does nothing but take arrays from its arguments")
+    if inline:
+        rest = inline_source(rest, inline, taken=set(stores) | set(params), where=where)
+    lines = [f"def {loop.__name__}({', '.join(params)}):"]
+    lines += ["    " + ast.unparse(s) for s in hoisted]
+    lines.append(f"    for {bparams[0]} in prange({count}):")
+    lines += [textwrap.indent(ast.unparse(s), "        ") for s in rest]
+    return "\n".join(lines) + "\n"
+
+
+def inline_source(stmts, functions, taken, where="inline_source"):
+    """Source-level inlining (CPU loops): every statement ``TARGETS = f(ARGS)`` in ``stmts`` (at any depth)
+    whose f is one of ``functions`` becomes f's statements, its parameters replaced by the arguments that
+    are plain names (the others go first into fresh locals), its locals renamed apart, and its one final
+    ``return X`` becoming ``TARGETS = X``; the pasted statements are inlined in turn. Why: numba inlines
+    a function (``inline="always"``) by assigning its arguments to new variables, and a new variable
+    holding an array costs two atomic reference-count operations per array and call where the function
+    also calls one that may raise (numba issue 2350: its pruning pass cannot remove them across the
+    error path); pasted with the caller's own names, the arrays are never copied. Returns the new list;
+    BuildError naming the function and the reason where one cannot be pasted (not one final return,
+    keyword arguments, a global that the caller's names would shadow), or where one of ``functions`` is
+    never called (a pasting asked for that does not happen is a loop that changed shape)."""
+    import ast
+    import textwrap
+
+    by_name = {f.__name__: f for f in functions}
+    count = [0]
+    pasted_names = set()
+
+    def paste(call, targets):
+        f = by_name[call.func.id]
+        what = f"{where}: {f.__name__} cannot be pasted in"
+        fn = ast.parse(textwrap.dedent(inspect.getsource(f))).body[0]
+        params = [a.arg for a in fn.args.args]
+        if call.keywords or any(isinstance(a, ast.Starred) for a in call.args):
+            raise BuildError(f"{what}: it is called with keyword or starred arguments")
+        if len(call.args) != len(params) or fn.args.vararg or fn.args.kwarg or fn.args.kwonlyargs:
+            raise BuildError(f"{what}: it is not called with one positional argument per parameter")
+        body = [s for s in fn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+        nested = (ast.Yield, ast.YieldFrom, ast.FunctionDef, ast.Lambda, ast.Global, ast.Nonlocal)
+        returns = [n for n in ast.walk(fn) if isinstance(n, ast.Return)]
+        if not body or not isinstance(body[-1], ast.Return) or body[-1].value is None or len(returns) != 1:
+            raise BuildError(f"{what}: it must end in its one return statement, with a value")
+        if any(isinstance(n, nested) for n in ast.walk(fn) if n is not fn):
+            raise BuildError(f"{what}: it nests a function, a generator or a global statement")
+        count[0] += 1
+        pasted_names.add(f.__name__)
+        tag = f"_{f.__name__}{count[0]}_"
+        stored = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)}
+        loaded = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)}
+        shadowed = (loaded - stored - set(params)) & taken
+        if shadowed:
+            raise BuildError(f"{what}: the caller's local(s) {sorted(shadowed)} would shadow its global(s)")
+        rename, first = {}, []
+        for name, arg in zip(params, call.args):
+            if isinstance(arg, ast.Name) and name not in stored:
+                rename[name] = arg.id
+            else:
+                rename[name] = tag + name
+                first.append(ast.Assign(targets=[ast.Name(tag + name, ast.Store())], value=arg, lineno=0))
+        rename.update({name: tag + name for name in stored - set(params)})
+        taken.update(v for v in rename.values())
+
+        class Rename(ast.NodeTransformer):
+            def visit_Name(self, node):
+                return ast.copy_location(ast.Name(rename.get(node.id, node.id), node.ctx), node)
+        body = [Rename().visit(s) for s in body]
+        last = ast.Assign(targets=targets, value=body[-1].value, lineno=0)
+        return first + body[:-1] + [last]
+
+    def walk(block):
+        out = []
+        for s in block:
+            value = s.value if isinstance(s, (ast.Assign, ast.Expr)) else None
+            if (isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id in by_name
+                    and value.func.id not in taken):
+                targets = s.targets if isinstance(s, ast.Assign) else [ast.Name("_", ast.Store())]
+                out += walk(paste(value, targets))
+                continue
+            for field in ("body", "orelse", "finalbody"):
+                inner = getattr(s, field, None)
+                if isinstance(inner, list) and inner and isinstance(inner[0], ast.stmt):
+                    setattr(s, field, walk(inner))
+            out.append(s)
+        return out
+
+    out = walk([ast.parse(ast.unparse(s)).body[0] for s in stmts])  # (copies: the cached trees stay intact)
+    missing = set(by_name) - pasted_names
+    if missing:
+        raise BuildError(f"{where}: no call of {sorted(missing)} to paste in (the loop's body changed shape)")
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def loop_parts(loop) -> tuple[str, str]:
+    """(body name, count expression) of a loop written ``for i in prange(COUNT):`` followed by one call
+    ``BODY(i, <the loop's own arguments in order>)``; ValueError for any other shape (a kernel must do
+    exactly what the CPU loop does)."""
+    import ast
+    import textwrap
+
+    tree = ast.parse(textwrap.dedent(inspect.getsource(loop)))
+    fn = tree.body[0]
+    stmts = [s for s in fn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+    params = [a.arg for a in fn.args.args]
+    ok = (len(stmts) == 1 and isinstance(stmts[0], ast.For) and isinstance(stmts[0].iter, ast.Call)
+          and getattr(stmts[0].iter.func, "id", "") == "prange" and len(stmts[0].iter.args) == 1
+          and len(stmts[0].body) == 1 and isinstance(stmts[0].body[0], ast.Expr)
+          and isinstance(stmts[0].body[0].value, ast.Call))
+    if ok:
+        call = stmts[0].body[0].value
+        names = [getattr(a, "id", None) for a in call.args]
+        ok = names == [stmts[0].target.id] + params and isinstance(call.func, ast.Name)
+    if not ok:
+        raise ValueError(f"{loop.__name__}: a loop over pennies must be 'for i in prange(COUNT): BODY(i, <its arguments>)'")
+    return call.func.id, ast.unparse(stmts[0].iter.args[0])

@@ -1,0 +1,284 @@
+"""The vector env's step resident on a CUDA GPU (PennyVectorEnv(..., backend="cuda")).
+
+The same step as on the CPU (envs/functional.step_env: the stages and the autoreset in all three of
+Gymnasium's modes, written once), built by backends/env.py as a kernel with one thread per env. Everything
+a step touches lives on the device in buffers allocated once: the envs' state (functional.EnvState, with
+each env's seed key, episode counter and pending-reset flag: resets are drawn on the device, by the same
+counter-based draws as on the CPU), the actions, and two sets of outputs (functional.StepResults and the
+impact buffers) that the steps use in turn. A warm step is: the actions copied into their buffer (on the
+device when they are a device tensor), one kernel launch with its arguments marshalled once
+(builder.PreparedLaunch), on the current torch stream; no allocation, no copy to the host, no
+synchronization. So a step can be captured in a CUDA graph (:class:`CudaGraphStep`).
+
+Outputs (``outputs``): "torch" (device tensors on the buffers, zero-copy), "device" (numba device arrays:
+the same without torch, e.g. under numba's CUDA simulator) or "numpy" (copied to the host each step, with
+the CPU's checks and info layout). The two output sets alternate, so a step's outputs stay valid until the
+step after the next; info masks (``_key``) are constant device tensors shared by all steps.
+
+Runs under numba's CUDA simulator too (NUMBA_ENABLE_CUDASIM=1; outputs "device" or "numpy"), which is how
+the tests check it against the CPU backend on machines without a GPU (tests/test_cuda.py).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..envs.functional import SAME_STEP, EnvState, StepResults, kinetic_energy
+from ..physics.scalar import ImpactBuffers
+
+
+def torch_available_on_cuda() -> bool:
+    try:
+        import torch
+    except ImportError:
+        return False
+    return bool(torch.cuda.is_available())
+
+
+class DeviceStep:
+    """The device side of a PennyVectorEnv with backend="cuda" (see the module docstring)."""
+
+    def __init__(self, env, device=None, outputs="torch"):
+        from numba import cuda
+        if outputs not in ("torch", "numpy", "device"):
+            raise ValueError(f"outputs must be 'torch', 'device' or 'numpy', got {outputs!r}")
+        if outputs == "torch" and not torch_available_on_cuda():
+            raise ValueError("outputs='torch' needs torch with CUDA; pass outputs='numpy' for numpy arrays")
+        if device is not None:
+            if isinstance(device, bool) or not isinstance(device, (int, np.integer)):
+                raise TypeError(f"device must be a CUDA device index (int) or None, got {type(device).__name__}")
+            if not 0 <= device < len(cuda.gpus):
+                raise ValueError(f"device must be in [0, {len(cuda.gpus)}) (the CUDA devices here), got {device}")
+            cuda.select_device(int(device))
+        self.cuda = cuda
+        self.device = 0 if device is None else int(device)
+        self.outputs = outputs
+        self.env = env
+        self.fns = env._fns
+        core = env._core
+        n, K, d = env.num_envs, env.max_impacts_in_info, core.obs_dim
+        self.n, self.K, self.obs_dim, self.n_act = n, K, d, core.n_act
+        self.same_step = env._p.autoreset == SAME_STEP
+        self.torch = None
+        if outputs == "torch" or torch_available_on_cuda():
+            import torch
+            self.torch = torch
+        alloc = self._alloc
+        self.st = EnvState(alloc((6, n)), alloc((4, n)), alloc((2, n)), alloc((2, n)), alloc(n, np.int64), alloc(n),
+                           alloc(n, np.int64), alloc(n), alloc(n, np.uint64), alloc(n, np.int64), alloc(n, np.bool_))
+        self.consts = self._upload(env._consts)
+        self.actions = alloc((n, self.n_act))
+        self.sets = [self._output_set() for _ in range(2)]
+        self.reset_obs = self._alloc_output((n, d), np.float32)
+        self.parity = 0
+        self.masks = self._view(self._upload(np.ones(n, dtype=bool), output=True))
+        kernel = self.fns.step_envs
+        self.launches = [kernel.prepare(self.st, self.actions, self.consts, out, buf) for out, buf in self.sets]
+        self.views = [(StepResults(*map(self._view, out)), ImpactBuffers(*map(self._view, buf))) for out, buf in self.sets]
+        self._streams = {}
+
+    # -- buffers -------------------------------------------------------------------------------------
+    def _alloc(self, shape, dtype=np.float64):
+        """A zeroed device array (numba's), allocated once."""
+        return self.cuda.to_device(np.zeros(shape, dtype=dtype))
+
+    def _alloc_output(self, shape, dtype=np.float64):
+        """A zeroed device array for an output, allocated once: with torch outputs a torch tensor's memory
+        (viewed by numba), which the step hands out as that tensor without a copy."""
+        if self.outputs == "torch":
+            name = "bool" if np.dtype(dtype) == np.bool_ else np.dtype(dtype).name
+            t = self.torch.zeros(shape, dtype=getattr(self.torch, name), device=f"cuda:{self.device}")
+            return self.cuda.as_cuda_array(t)
+        return self._alloc(shape, dtype)
+
+    def _upload(self, host, output=False):
+        d = (self._alloc_output if output else self._alloc)(host.shape, host.dtype)
+        d.copy_to_device(np.ascontiguousarray(host))
+        return d
+
+    def _output_set(self):
+        """One set of outputs (StepResults) and impact buffers ((K, n) slots, counts starting at K so that the
+        first step pads every slot; no post-impact states: the step does not return them)."""
+        n, K, d, alloc = self.n, self.K, self.obs_dim, self._alloc_output
+        out = StepResults(alloc((n, d), np.float32), alloc(n), alloc(n, np.bool_), alloc(n, np.bool_), alloc(n),
+                          alloc(n, np.int8), alloc(n), alloc(n), alloc(n, np.int64),
+                          alloc((n if self.same_step else 0, d), np.float32), alloc(n, np.bool_))
+        buf = ImpactBuffers(self._upload(np.full(n, K, dtype=np.int64), output=True), alloc((K, n)), alloc((K, n), np.int8),
+                            alloc((0, 6, n)), alloc((0, n), np.int8), alloc(n, np.int64))
+        return out, buf
+
+    def _view(self, a):
+        """The user-facing object of device array a: a torch tensor on its memory (outputs "torch"), a itself."""
+        if self.outputs == "torch":
+            return self.torch.as_tensor(a, device=f"cuda:{self.device}")
+        return a
+
+    def stream(self):
+        """numba's view of the current torch stream (so that a step joins torch's work, and graph capture), or
+        the default stream without torch."""
+        if self.torch is None:
+            return 0
+        handle = self.torch.cuda.current_stream(self.device).cuda_stream
+        s = self._streams.get(handle)
+        if s is None:
+            s = self._streams[handle] = self.cuda.external_stream(handle)
+        return s
+
+    # -- host <-> device (reset, pickling, rendering: not the step) --------------------------------
+    def host(self, name):
+        return getattr(self.st, name).copy_to_host()
+
+    def state_to_host(self) -> EnvState:
+        return EnvState(*(a.copy_to_host() for a in self.st))
+
+    def state_from_host(self, st) -> None:
+        for d, h in zip(self.st, st):
+            d.copy_to_device(np.ascontiguousarray(h))
+
+    # -- the step ------------------------------------------------------------------------------------
+    def load_actions(self, actions):
+        """The actions into their device buffer, checked as far as the host can without a round trip: a
+        TypeError for a wrong type, a ValueError for a wrong shape; non-finite values are refused on the host
+        for host arrays (and for device ones with numpy outputs), and otherwise end the env's episode in the
+        kernel (functional.LIMIT_ACTION)."""
+        from ..envs.core import check_actions
+        shape = (self.n, self.n_act)
+        if hasattr(actions, "__cuda_array_interface__") and not isinstance(actions, np.ndarray):
+            a = self.cuda.as_cuda_array(actions)
+            if a.dtype.kind != "f":
+                raise TypeError(f"actions must be a floating-point array, got dtype {a.dtype}")
+            if a.shape != shape:
+                if not (self.n_act == 1 and a.shape == (self.n,)):
+                    raise ValueError(f"actions must have shape {shape}, got shape {a.shape}")
+            if self.torch is not None:
+                t = self.torch.as_tensor(actions, device=f"cuda:{self.device}")
+                if self.outputs == "numpy":  # (numpy outputs synchronize anyway: refuse as the CPU does)
+                    finite = self.torch.isfinite(t.reshape(self.n, -1)).all(dim=1)
+                    if not bool(finite.all()):
+                        bad = self.torch.nonzero(~finite).flatten().cpu().numpy()
+                        raise ValueError(f"actions: non-finite action in sub-env(s) {bad[:10].tolist()}"
+                                         f"{' ...' if bad.size > 10 else ''}")
+                self._actions_t().copy_(t.reshape(shape))
+            elif a.dtype == np.float64 and a.is_c_contiguous():
+                self.actions.copy_to_device(a.reshape(shape), stream=self.stream())
+            else:
+                raise TypeError("actions on the device without torch must be a C-contiguous float64 array")
+            return
+        a = check_actions(actions, shape, "actions")
+        self.actions.copy_to_device(np.ascontiguousarray(a, dtype=np.float64), stream=self.stream())
+
+    def _actions_t(self):
+        if not hasattr(self, "_act_t"):
+            self._act_t = self.torch.as_tensor(self.actions, device=f"cuda:{self.device}")
+        return self._act_t
+
+    def launch(self, parity):
+        """The step kernel on output set ``parity`` (prepared once), on the current stream."""
+        self.launches[parity].launch(self.stream())
+
+    def step(self, actions):
+        """env.step on the device (module docstring); returns env.step's tuple in the outputs' type."""
+        env = self.env
+        self.load_actions(actions)  # checked before the step starts (nothing changes on bad input)
+        parity = self.parity
+        env._in_step = True
+        self.launch(parity)
+        self.parity = parity ^ 1
+        env._in_step = False
+        if env._trails is not None:
+            env._extend_trails()
+        return self.results(parity)
+
+    def results(self, parity):
+        """The outputs of set ``parity`` as env.step returns them."""
+        out, buf = self.views[parity]
+        if self.outputs == "numpy":
+            host = StepResults(*(a.copy_to_host() for a in out))
+            counts, times, ends = buf.count.copy_to_host(), buf.time.copy_to_host().T, buf.end.copy_to_host().T
+            info = self.env._info(counts, np.ascontiguousarray(times), np.ascontiguousarray(ends), host.kinetic_energy,
+                                  host.terminated, host.limit, host.time, host.dist, host.arc_count)
+            if self.same_step and host.ended.any():
+                self.env._final_info(info, host.final_obs, host.ended, host.terminated)
+            return host.obs, host.reward, host.terminated, host.truncated, info
+        m = self.masks
+        info = {"impacts": buf.count, "_impacts": m, "impact_times": buf.time.T, "_impact_times": m,
+                "impact_ends": buf.end.T, "_impact_ends": m, "kinetic_energy": out.kinetic_energy, "_kinetic_energy": m,
+                "time": out.time, "_time": m, "distance": out.dist, "_distance": m, "is_success": out.terminated,
+                "_is_success": m, "limit": out.limit, "_limit": m}
+        if self.env._core.counts_arc:
+            info["arc_impacts"], info["_arc_impacts"] = out.arc_count, m
+        if self.same_step:
+            info["final_obs"], info["_final_obs"] = out.final_obs, out.ended
+            info["final_info"], info["_final_info"] = {"is_success": out.terminated, "_is_success": out.ended}, out.ended
+        return out.obs, out.reward, out.terminated, out.truncated, info
+
+    # -- reset ---------------------------------------------------------------------------------------
+    def reset(self, host, rows, keys, episodes, states, targets):
+        """env.reset on the device: keys, episode counters and pending flags uploaded (host: the state as the
+        host last saw it), the rows' fresh episodes drawn on the device (the same draws as on the CPU), reset
+        options applied, every row's observation computed there. Returns (obs, info) as the step's outputs."""
+        host.key[:], host.episode[:] = keys, episodes
+        host.pending[rows] = False
+        if states is not None:
+            host.S[:, rows] = states[rows].T
+        if targets is not None:
+            host.target[:, rows] = targets[rows].T
+        for name in ("key", "episode", "pending"):
+            getattr(self.st, name).copy_to_device(getattr(host, name))
+        d_rows = self.cuda.to_device(np.ascontiguousarray(rows, dtype=np.int64))
+        stream = self.stream()
+        self.fns.reset_rows(d_rows, self.st, self.consts, self.reset_obs, stream=stream)
+        if states is not None or targets is not None:
+            fresh = self.state_to_host()  # the drawn rows, with the options' states and targets put in
+            if states is not None:
+                fresh.S[:, rows] = states[rows].T
+                self.st.S.copy_to_device(fresh.S)
+            if targets is not None:
+                fresh.target[:, rows] = targets[rows].T
+                self.st.target.copy_to_device(fresh.target)
+            self.fns.observe_rows(d_rows, self.st, self.consts, self.reset_obs, stream=stream)
+        others = np.flatnonzero(~np.isin(np.arange(self.n), rows))
+        if others.size:
+            self.fns.observe_rows(self.cuda.to_device(others.astype(np.int64)), self.st, self.consts, self.reset_obs,
+                                  stream=stream)
+        st = self.state_to_host()
+        n, K = self.n, self.K
+        info_host = (np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
+                     kinetic_energy(st.S, self.env._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8), st.time,
+                     st.dist, st.count)
+        if self.outputs == "numpy":
+            return self.reset_obs.copy_to_host(), self.env._info(*info_host)
+        info = self.env._info(*(self._view(self._upload(np.ascontiguousarray(a), output=True)) for a in info_host))
+        return self._view(self.reset_obs), info
+
+
+class CudaGraphStep:
+    """``env.step`` captured in a CUDA graph (torch.cuda.graph) and replayed: ``step = CudaGraphStep(env)``,
+    then ``obs, reward, terminated, truncated, info = step(actions)`` with actions a device tensor of the
+    action space's shape. The actions are copied into the graph's static input, the captured step replays
+    (its kernel launch, on the current stream), and the outputs are the captured step's tensors, the same
+    ones at every call (clone what you keep). Needs backend="cuda", outputs="torch" and a GPU. To fold the
+    step into a larger graph (a policy's forward pass and the step, as training/ppo_torch.py does), capture
+    ``env.step`` inside your own ``torch.cuda.graph`` the same way: after warm-up steps it allocates nothing
+    and never synchronizes."""
+
+    def __init__(self, env, warmup: int = 2):
+        g = getattr(env, "_gpu", None)
+        if g is None or g.outputs != "torch":
+            raise ValueError("CudaGraphStep needs a PennyVectorEnv with backend='cuda' and outputs='torch'")
+        torch = g.torch
+        self.env = env
+        self.actions = torch.zeros((env.num_envs, g.n_act), dtype=torch.float32, device=f"cuda:{g.device}")
+        side = torch.cuda.Stream(device=g.device)
+        side.wait_stream(torch.cuda.current_stream(g.device))
+        with torch.cuda.stream(side):  # warm-up on a side stream, as torch's graph capture asks
+            for _ in range(warmup):
+                env.step(self.actions)
+        torch.cuda.current_stream(g.device).wait_stream(side)
+        self.graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(self.graph):
+            self.outputs = env.step(self.actions)
+
+    def __call__(self, actions):
+        self.actions.copy_(actions)
+        self.graph.replay()
+        return self.outputs

@@ -1,0 +1,32 @@
+"""The math namespace ``xp`` of the CUDA copies (backends/builder.py, target "cuda"): kernels.SCALAR's
+functions and constants for numba-cuda device code, as backends/numba_math.py is for the CPU. ``math``'s
+functions compile to CUDA's libdevice (their last bit can differ from the CPU's libm: docs/gpu.md).
+Imported only where numba-cuda is installed."""
+import math
+import types
+
+import numpy as np
+
+_NAMESPACE = []
+
+
+def _where(cond, a, b):
+    return a if cond else b
+
+
+def namespace():
+    """The namespace module (built once per process: ``where`` is a device function)."""
+    if not _NAMESPACE:
+        from numba import cuda
+
+        from . import numba_math
+        ns = types.ModuleType("penny_env_cuda_math")
+        ns.scalar = True
+        ns.sin, ns.cos, ns.sqrt, ns.inf, ns.pi = math.sin, math.cos, math.sqrt, math.inf, math.pi
+        ns.abs, ns.minimum, ns.maximum = abs, min, max
+        ns.where = cuda.jit(device=True)(_where)
+        ns.u64, ns.to_float = np.uint64, float
+        for name in ("ONE", "GOLDEN", "M1", "M2", "MASK", "U11", "U27", "U30", "U31"):
+            setattr(ns, name, getattr(numba_math, name))
+        _NAMESPACE.append(ns)
+    return _NAMESPACE[0]

@@ -1,0 +1,220 @@
+"""The env step built for a target: :func:`env_entry_points` returns the typed record of entry points of
+one (target, table kind, task), built by backends/builder.py from envs/functional.py's stages, the task's
+record (envs/tasks/) and the compiled physics (backends/physics.py).
+
+Entry points take the constants packed as one float64 array (backends/packing.py) and the records as plain
+tuples of arrays (numba unboxes a plain tuple several times faster than a NamedTuple): the small functions
+below unpack them and call the stages. On the CPU the vector step is one parallel numba loop (serial for
+few envs and in forked children, backends/threads.py); on CUDA every loop is a kernel with one thread per
+env, whose body unpacks the constants itself (a kernel takes one pointer for them).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+from ..envs import draws, functional
+from ..envs.functional import (EnvState, PennyState, StepResults, angle_trig, distance, env_step, initial_state,
+                               observe_rows, reset_rows, step_env, step_envs, write_observation)
+from ..physics.scalar import ImpactBuffers
+from . import cache, generated, packing
+from .builder import Builder, check_target
+from .physics import build_variant, check_kind, physics_build, physics_modules, variant_key
+
+prange = range  # the loops below are kernels on CUDA (backends/builder.py)
+
+
+class EnvEntryPoints(NamedTuple):
+    """The compiled env step of one (target, table kind, task). Single env: ``env_step``, ``initial_state``,
+    ``observe_state``; vector env: ``step_envs``, ``reset_rows``, ``observe_rows`` (CPU and python: plain
+    callables; CUDA: builder.CudaLoop kernels). ``unpack``: the plain unpacker of the constants."""
+
+    target: str
+    env_step: Callable
+    initial_state: Callable
+    observe_state: Callable
+    step_envs: Callable
+    reset_rows: Callable
+    observe_rows: Callable
+    unpack: Callable
+
+
+# -- the entry points' bodies (plain Python; copied into each build) ------------------------------------------
+def env_step_packed(st, a0, a1, consts, obs, buf):
+    """env_step with st a plain tuple of PennyState's fields, buf a plain tuple of ImpactBuffers' arrays (one
+    penny): the observation into row 0 of obs; returns the changed state fields (s, trig, count, dist, steps,
+    time), the impact count, reward, terminated, truncated, kinetic energy and limit, flat (fewer objects for
+    numba to box: the single env's whole step costs a few microseconds)."""
+    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
+    b = ImpactBuffers(*buf)
+    new, r, te, tu, e, lim = env_step(PennyState(*st), a0, a1, p, m, k, b, 0, obs, 0)
+    return new.s, new.trig, new.count, new.dist, new.steps, new.time, b.count[0], r, te, tu, e, lim
+
+
+def initial_state_packed(key, episode, consts, obs):
+    """initial_state of the single env: (s, trig, target, arc, dist); its observation into row 0 of obs."""
+    p, m, k = unpack(consts)  # noqa: F821
+    st = initial_state(key, episode, p, m, k)
+    write_observation(obs, 0, st, p, k)
+    return st.s, st.trig, st.target, st.arc, st.dist
+
+
+def observe_state_packed(st, consts, obs):
+    """The single env at step 0 of PennyState st's state and target (reset options): (trig, dist); the
+    observation into row 0 of obs."""
+    p, m, k = unpack(consts)  # noqa: F821
+    st = PennyState(*st)
+    trig = angle_trig(st.s)
+    d = distance(st.s, st.target)
+    write_observation(obs, 0, PennyState(st.s, trig, st.target, st.arc, 0, d, 0, 0.0), p, k)
+    return trig, d
+
+
+def step_envs_packed(st, actions, consts, out, buf):
+    """The vector step (CPU and python): records from plain tuples, constants unpacked once."""
+    p, m, k = unpack(consts)  # noqa: F821
+    step_envs(EnvState(*st), actions, p, m, k, StepResults(*out), ImpactBuffers(*buf))
+
+
+def reset_rows_packed(rows, st, consts, obs):
+    p, m, k = unpack(consts)  # noqa: F821
+    reset_rows(rows, EnvState(*st), p, m, k, obs)
+
+
+def observe_rows_packed(rows, st, consts, obs):
+    p, m, k = unpack(consts)  # noqa: F821
+    observe_rows(rows, EnvState(*st), p, m, k, obs)
+
+
+def step_env_device(i, st, actions, consts, out, buf):
+    """One env of the vector step on CUDA (one thread): the constants unpacked by the thread itself."""
+    p, m, k = unpack(consts)  # noqa: F821
+    step_env(i, st, actions, p, m, k, out, buf)
+
+
+def step_envs_device(st, actions, consts, out, buf):
+    for i in prange(st.S.shape[1]):
+        step_env_device(i, st, actions, consts, out, buf)
+
+
+def reset_row_device(j, rows, st, consts, obs):
+    p, m, k = unpack(consts)  # noqa: F821
+    functional.reset_row(j, rows, st, p, m, k, obs)
+
+
+def reset_rows_device(rows, st, consts, obs):
+    for j in prange(rows.shape[0]):
+        reset_row_device(j, rows, st, consts, obs)
+
+
+def observe_row_device(j, rows, st, consts, obs):
+    p, m, k = unpack(consts)  # noqa: F821
+    functional.observe_row(j, rows, st, p, m, k, obs)
+
+
+def observe_rows_device(rows, st, consts, obs):
+    for j in prange(rows.shape[0]):
+        observe_row_device(j, rows, st, consts, obs)
+
+
+def _vector_count(args):
+    return args[1].shape[0]  # step_envs_packed's actions (N, n_act)
+
+
+def _rows_count(args):
+    return args[0].shape[0]
+
+
+# -- the build ---------------------------------------------------------------------------------------------------
+_ENTRY: dict = {}  # (target, variant_key(kind), task record, constants type) -> EnvEntryPoints
+
+
+def env_modules(record) -> tuple:
+    """The modules the env build inlines (their sources go into the copies' names: backends/cache.py)."""
+    import sys
+    stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
+    task_modules = tuple(dict.fromkeys(sys.modules[f.__module__] for f in stages))
+    return physics_modules() + (functional, draws, sys.modules[__name__], packing) + task_modules
+
+
+def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool = False,
+                     max_registers=None) -> EnvEntryPoints:
+    """The entry points of the env step for ``target`` ("python", "cpu", "cuda"), table kind ``kind`` (the
+    Model.kind of the constants they will receive: the compiled physics calls that table's formulas whatever
+    Model.kind says; the python target runs any), the task ``record`` (envs/tasks/) and its constants' type.
+    Built once per process and key; fresh: build anew, keep nothing (the PTX tests). max_registers: CUDA's
+    per-thread register cap of the step kernel (None: the compiler's choice)."""
+    target = check_target(target)
+    kind = -1 if target == "python" else check_kind(kind)
+    key = (target, variant_key(kind), record, constants_type, max_registers)
+    if key in _ENTRY and not fresh:
+        return _ENTRY[key]
+    from ..envs.functional import EnvParams
+    from ..physics.scalar import Model
+    phys = physics_build(target, kind, fresh)  # (also picks the threading layer: backends/threads.py)
+    stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
+    own = phys.cache and cache.cacheable(stages)
+    modules = env_modules(record)
+    if own:
+        cache.drop_stale_cache(Path(functional.__file__).with_name("__pycache__"), modules)
+    b = Builder(target, build_variant(target, kind, modules) + f"_{record.name}", cache=own)
+    b.namespace.update({k: v for k, v in phys.namespace.items() if k != "__builtins__"})
+    b.origin.update(phys.origin)
+    b.add({k: v for k, v in vars(functional).items() if not callable(v) or isinstance(v, type)})
+    b.namespace.update(ImpactBuffers=ImpactBuffers, PennyState=PennyState, EnvState=EnvState,
+                       StepResults=StepResults)
+    b.add({k: v for k, v in vars(draws).items() if not callable(v)})
+    b.copies((draws.draw_mix, draws.draw_stream, draws.draw_uniform))
+    # the task's stages under the names the step calls
+    b.copy_foreign(record.reward, "task_reward")
+    b.copy_foreign(record.target, "task_target")
+    if record.observation is not None:
+        b.copy_foreign(record.observation, "task_observation")
+    else:
+        b.copy(functional.no_task_observation, name="task_observation")
+    if record.marked_arc is not None:
+        b.copy_foreign(record.marked_arc, "task_marked_arc")
+    else:
+        b.copy(functional.no_marked_arc, name="task_marked_arc")
+    records = (EnvParams, Model, constants_type)
+    unpack = packing.unpacker(records)
+    b.namespace.update(packing.record_names(records))
+    b.copy(unpack, inline=True)
+    b.copies((functional.clip_action, functional.angle_trig, functional.kinetic_energy, functional.distance,
+              functional.observation, functional.actuate, functional.termination, functional.initial_state))
+    # inlined: a call that passes arrays increments and decrements their reference counts, atomically
+    b.copies((functional.write_observation, functional.env_row, functional.write_state, functional.reset_env),
+             inline=True)
+    if target == "cuda":
+        b.copies((functional.transition, env_step, step_env, functional.reset_row, functional.observe_row,
+                  step_env_device, reset_row_device, observe_row_device))
+        step = b.kernel(step_envs_device, max_registers=max_registers)
+        resets = b.kernel(reset_rows_device)
+        observes = b.kernel(observe_rows_device)
+        single = initial = observe_state = None
+    else:
+        # inlined into the entries and the loop: called as functions, their many arguments cost more than
+        # their work (the loop's bodies write by position, see functional.write_state)
+        b.copies((functional.transition, env_step), inline=True)
+        single = b.copy(env_step_packed)
+        initial = b.copy(initial_state_packed)
+        observe_state = b.copy(observe_state_packed)
+        b.copies((step_env, functional.reset_row, functional.observe_row), inline=True)
+        # one parallel call at a time (threads.locked), serially for few envs or in a forked child; the step
+        # and the event loop's driver pasted into the loop (builder.inline_source)
+        step = b.loop(step_envs, entry=step_envs_packed, count=_vector_count,
+                      inline=(env_step, functional.transition, functional.run_interval))
+        resets = b.loop(reset_rows, entry=reset_rows_packed, count=_rows_count)
+        observes = b.loop(observe_rows, entry=observe_rows_packed, count=_rows_count)
+    out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack)
+    if not fresh:
+        _ENTRY[key] = out
+    return out
+
+
+def cuda_launch_functions(entry: EnvEntryPoints) -> dict:
+    """The CUDA kernels of ``entry`` by name (for the PTX tests and the register report)."""
+    return {"step_envs": entry.step_envs, "reset_rows": entry.reset_rows, "observe_rows": entry.observe_rows}
+
+
+_ = generated  # (generated source: the unpacker, the loops)

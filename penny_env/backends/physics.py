@@ -1,0 +1,223 @@
+"""The compiled physics: physics/kernels.py, flows.py, scalar.py and batch_loops.py as they are, built by
+backends/builder.py for one target and one table kind.
+
+Nothing here restates the physics. :func:`physics_build` has the builder copy the physics' functions, in
+which the math namespace ``SCALAR`` is the target's, and puts in place of the plain loop's dispatches the
+table's own formulas (``wall_terms``, ``wall_hess`` and ``wall_distance`` call them directly: the impact
+search pays no branch over the registered shapes and keeps its helpers inlined) and a dispatch over the
+registered laws (:func:`law_dispatch_source`, generated into a real file): laws only act at impacts. The
+physics is compiled once per (target, table kind, the table's formulas, the laws). A penny takes the same
+operations as in the plain-Python loop (the "python" target); tests/test_compiled.py checks that they agree
+bitwise.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+
+from . import cache, generated
+from .builder import Builder, check_target
+
+
+def variant_name(kind: int) -> str:
+    """The name of the compiled variant for Model.kind ``kind``: "plane" (scalar.OTHER), else named after the
+    table's formula (not its index, which follows the order of registration)."""
+    if kind < 0:
+        return "plane"
+    from ..physics.tables import COMPILED_FORMULAS
+    terms = COMPILED_FORMULAS[kind][0]
+    name = f"{terms.__module__.rsplit('.', 1)[-1]}_{terms.__qualname__}"
+    return "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in name)
+
+
+def check_kind(kind) -> int:
+    """kind as an int: scalar.OTHER (the open plane) or an index into tables.COMPILED_FORMULAS."""
+    from ..physics.tables import COMPILED_FORMULAS
+    if isinstance(kind, bool) or not isinstance(kind, (int, np.integer)):
+        raise TypeError(f"kind must be an int (Model.kind), got {type(kind).__name__}")
+    if not -1 <= kind < len(COMPILED_FORMULAS):
+        raise ValueError(f"kind must be -1 (the open plane) or a registered table kind in [0, {len(COMPILED_FORMULAS)}), "
+                         f"got {kind}")
+    return int(kind)
+
+
+def variant_key(kind: int) -> tuple:
+    """What the code compiled for table kind ``kind`` depends on: the kind's formulas and every law."""
+    from ..physics.laws import COMPILED_LAWS
+    from ..physics.tables import COMPILED_FORMULAS
+    return (kind, COMPILED_FORMULAS[kind] if kind >= 0 else None, tuple(COMPILED_LAWS))
+
+
+def formulas(kind: int) -> list:
+    """The table's formulas and the laws that code compiled for ``kind`` inlines (cache.cacheable)."""
+    from ..physics.laws import COMPILED_LAWS
+    from ..physics.tables import COMPILED_FORMULAS
+    return (list(COMPILED_FORMULAS[kind]) if kind >= 0 else []) + list(COMPILED_LAWS)
+
+
+def physics_modules() -> tuple:
+    """The modules whose functions the compiled physics copies: the physics, the backends that shape it, and
+    every registered table's and law's module of penny_env's own (users' are never cached)."""
+    from ..physics import batch_loops, flows, kernels, scalar
+    from ..physics.laws import COMPILED_LAWS
+    from ..physics.tables import COMPILED_FORMULAS
+    from . import builder, cuda_math, numba_math
+    own = [g for triple in COMPILED_FORMULAS for g in triple if g is not None] + list(COMPILED_LAWS)
+    tables = tuple(dict.fromkeys(sys.modules[f.__module__] for f in own if f.__module__.startswith("penny_env.")))
+    return (kernels, flows, scalar, batch_loops, numba_math, cuda_math, builder, generated,
+            importlib.import_module(__name__)) + tables
+
+
+# -- what replaces the plain loop's dispatches in a build for one table kind -----------------------------------
+def _no_wall(m, x, y):
+    """wall_terms / wall_hess of the open plane's builds, which never evaluate a wall (the environments and the
+    batch loops flow the plane's pennies without an impact search)."""
+    return np.nan, np.nan, np.nan
+
+
+def _no_ray(m, c, s):
+    """wall_distance of the open plane's builds (no task draws a wall point there)."""
+    return np.nan
+
+
+def _table_wall_terms(m, x, y):
+    """scalar.wall_terms for the one table kind a build is for (table_terms: its formula)."""
+    return table_terms(table_constants_of(m), x, y)  # noqa: F821  (in the build's namespace)
+
+
+def _table_wall_hess(m, x, y):
+    return table_hess(table_constants_of(m), x, y)  # noqa: F821
+
+
+def _table_wall_distance(m, c, s):
+    """scalar.wall_distance for the one table kind a build is for: its ray formula."""
+    return table_ray(table_constants_of(m), c, s)  # noqa: F821
+
+
+def plane_advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
+    """scalar.advance_into in the open plane's builds: one flow, the whole motion where there is no wall (and
+    run_interval never calls it there). It keeps the event loop out of the plane's machine code."""
+    return flow1(s, acc1, acc2, dt, m.R), dt  # noqa: F821  (in the build's namespace)
+
+
+def plane_advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc):
+    """scalar.advance_through_into in the open plane's builds (see :func:`plane_advance_into`)."""
+    return flow1(s, acc1, acc2, dt, m.R), dt  # noqa: F821
+
+
+def law_dispatch_source(n_laws: int) -> str:
+    """Source of the compiled ``law_terms``: a branch per registered law function j, calling ``law_j``."""
+    lines = ['"""Generated by penny_env.backends.physics.law_dispatch_source: a branch per registered law."""', "", "",
+             "def law_terms(m, W, w, a, b, grad2):"]
+    for j in range(n_laws - 1):
+        lines += [f"    if m.law == {j}:", f"        return law_{j}(W, w, a, b, grad2, m.e, m.Itot, m.J, m.m)"]
+    lines += [f"    return law_{n_laws - 1}(W, w, a, b, grad2, m.e, m.Itot, m.J, m.m)", ""]
+    return "\n".join(lines)
+
+
+# -- the build ----------------------------------------------------------------------------------------------
+_BUILDS: dict = {}  # (target,) + variant_key(kind) -> Builder
+
+
+def physics_build(target: str, kind: int, fresh: bool = False) -> Builder:
+    """The Builder holding the physics' copies for ``target`` and table kind ``kind``; the env step's build
+    (backends/env.py) starts from a copy of its namespace. Built once per process and key; fresh: a new
+    build, not kept (the PTX tests compile each compute capability from scratch)."""
+    target = check_target(target)
+    kind = -1 if target == "python" else check_kind(kind)  # (plain Python dispatches over the tables itself)
+    key = (target,) + variant_key(kind)
+    if not fresh and key in _BUILDS:
+        return _BUILDS[key]
+    b = _physics_build(target, kind)
+    if not fresh:
+        _BUILDS[key] = b
+    return b
+
+
+def build_variant(target: str, kind: int, modules) -> str:
+    """The name part of a build's copies: the table variant, the digest of the sources they inline, the target."""
+    return f"{variant_name(kind)}_{cache.source_digest(modules)}" + ("_cuda" if target == "cuda" else "")
+
+
+def _physics_build(target, kind):
+    if target == "cpu":
+        try:
+            import numba  # noqa: F401
+        except ImportError:
+            raise ImportError("the compiled backend needs numba: pip install numba") from None
+        from . import threads
+        threads.configure()  # before any parallel loop runs: the threading layer is chosen once per process
+    from ..physics import batch_loops, flows, kernels, scalar
+    from ..physics.laws import COMPILED_LAWS
+    from ..physics.tables import COMPILED_FORMULAS
+    own = target == "cpu" and cache.cacheable(formulas(kind)) and cache.disk_cache_available()
+    modules = physics_modules()
+    if own:
+        for folder in (Path(scalar.__file__).with_name("__pycache__"), Path(scalar.__file__).parent / "tables" / "__pycache__",
+                       generated.generated_dir() / "__pycache__"):
+            cache.drop_stale_cache(folder, modules)
+    b = Builder(target, build_variant(target, kind, modules), cache=own)
+    for module in (kernels, flows, scalar):
+        b.add(module)
+    if target == "python":  # the physics as it is (its own dispatches: any table, any law), for every kind
+        b.laws = list(COMPILED_LAWS)
+        b.functions = {k: v for k, v in vars(scalar).items() if isinstance(v, types.FunctionType)}
+        b.functions.update(advance_batch=batch_loops.advance_batch, first_impact_batch=batch_loops.first_impact_batch)
+        b.namespace.update(b.functions)
+        b.origin.update((k, v) for k, v in b.namespace.items() if isinstance(v, types.FunctionType))
+        return b
+    # the quadrature rules as 2-D arrays: the same numbers, which compiled code indexes faster than a tuple of tuples
+    for name in ("RULE_NODES", "RULE_WEIGHTS"):
+        b.namespace[name] = np.array(getattr(flows, name))
+    sources = [f for module in (kernels, scalar) for f in vars(module).values()
+               if isinstance(f, types.FunctionType) and f.__module__ == module.__name__]
+    sources.append(flows.phase_sweep)
+    b.copies(sources)
+    # inlined where they are called: every penny's step runs them, and a call that passes the buffers
+    # increments and decrements the reference counts of their six arrays (atomically: the threads of a
+    # parallel loop contend for them)
+    b.copies((scalar.run_interval, scalar.clear_row), inline=True)
+
+    def formula(f):  # penny_env's run in the physics namespace; a user's in its own globals
+        if f.__module__.startswith("penny_env."):
+            return b.copy(f)
+        return b._jit(f)
+
+    # the table's formulas in place of scalar.wall_terms / wall_hess / wall_distance (which index a Python
+    # list), and the laws' dispatch in place of scalar.law_terms
+    if kind >= 0:
+        terms, hess, ray = COMPILED_FORMULAS[kind]
+        b.namespace["table_terms"], b.namespace["table_hess"] = formula(terms), formula(hess)
+        b.copy(_table_wall_terms, name="wall_terms", replaces=scalar.wall_terms)
+        b.copy(_table_wall_hess, name="wall_hess", replaces=scalar.wall_hess)
+        if ray is not None:
+            b.namespace["table_ray"] = formula(ray)
+            b.copy(_table_wall_distance, name="wall_distance", replaces=scalar.wall_distance)
+        else:
+            b.copy(scalar.wall_distance_bisection, name="wall_distance", replaces=scalar.wall_distance)
+    else:  # the open plane never evaluates a wall, nor runs the event loop (about halves its build)
+        b.copy(_no_wall, name="wall_terms", replaces=scalar.wall_terms)
+        b.copy(_no_wall, name="wall_hess", replaces=scalar.wall_hess)
+        b.copy(_no_ray, name="wall_distance", replaces=scalar.wall_distance)
+        b.copy(plane_advance_into, name="advance_into", replaces=scalar.advance_into)
+        b.copy(plane_advance_through_into, name="advance_through_into", replaces=scalar.advance_through_into)
+    for j, update in enumerate(COMPILED_LAWS):
+        b.namespace[f"law_{j}"] = formula(update)
+    b.laws = [b.namespace[f"law_{j}"] for j in range(len(COMPILED_LAWS))]  # (their compiled copies, for tests)
+    dispatch = generated.define("law_dispatch", law_dispatch_source(len(COMPILED_LAWS)), {}, __name__)["law_terms"]
+    b.copy(dispatch, replaces=scalar.law_terms)
+    functions = {f.__name__: b.namespace[f.__name__] for f in sources}
+    functions.update(advance_into=b.namespace["advance_into"], advance_through_into=b.namespace["advance_through_into"],
+                     wall_distance=b.namespace["wall_distance"])
+    # the per-penny bodies and their loops (parallel over pennies on the CPU, a kernel on CUDA), inlined into
+    # the loops; the event loop's driver pasted into the batch loop (builder.inline_source: no per-penny
+    # reference counting of the buffers)
+    b.copies((batch_loops.angle_trig_into, batch_loops.advance_penny, batch_loops.first_impact_penny), inline=True)
+    functions["advance_batch"] = b.loop(batch_loops.advance_batch, inline=(scalar.run_interval,))
+    functions["first_impact_batch"] = b.loop(batch_loops.first_impact_batch)
+    b.functions = functions
+    return b
