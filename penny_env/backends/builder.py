@@ -351,18 +351,35 @@ def hoisted_source(loop, body, inline=()) -> str:
     if set(stores) & set(bparams):
         raise BuildError(f"{where} assigns its parameter(s) {sorted(set(stores) & set(bparams))}")
     stmts = [s for s in bfn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+    if inline:
+        stmts = inline_source(stmts, inline, taken=set(stores) | set(params), where=where)
+    stores = [n.id for s in stmts for n in ast.walk(s) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)]
 
     def extraction(s):
         return (isinstance(s, ast.Assign) and len(s.targets) == 1 and isinstance(s.targets[0], ast.Name)
                 and stores.count(s.targets[0].id) == 1 and isinstance(s.value, ast.Subscript)
                 and isinstance(s.value.value, ast.Name) and s.value.value.id in params
                 and isinstance(s.value.slice, ast.Constant) and type(s.value.slice.value) is int)
-    hoisted = [s for s in stmts if extraction(s)]
-    rest = [s for s in stmts if not extraction(s)]
+
+    hoisted = []
+
+    def lift(block):
+        """block without its extractions (at any depth: pasted functions take their arrays in branches), which
+        go to ``hoisted`` (pure: taking an array out of an argument, under a name assigned nowhere else)."""
+        kept = []
+        for s in block:
+            if extraction(s):
+                hoisted.append(s)
+                continue
+            for field in ("body", "orelse", "finalbody"):
+                inner = getattr(s, field, None)
+                if isinstance(inner, list) and inner and isinstance(inner[0], ast.stmt):
+                    setattr(s, field, lift(inner) or [ast.Pass()])
+            kept.append(s)
+        return kept
+    rest = lift(stmts)
     if not rest:
         raise BuildError(f"{where} does nothing but take arrays from its arguments")
-    if inline:
-        rest = inline_source(rest, inline, taken=set(stores) | set(params), where=where)
     lines = [f"def {loop.__name__}({', '.join(params)}):"]
     lines += ["    " + ast.unparse(s) for s in hoisted]
     lines.append(f"    for {bparams[0]} in prange({count}):")
@@ -401,8 +418,11 @@ def inline_source(stmts, functions, taken, where="inline_source"):
         body = [s for s in fn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
         nested = (ast.Yield, ast.YieldFrom, ast.FunctionDef, ast.Lambda, ast.Global, ast.Nonlocal)
         returns = [n for n in ast.walk(fn) if isinstance(n, ast.Return)]
-        if not body or not isinstance(body[-1], ast.Return) or body[-1].value is None or len(returns) != 1:
-            raise BuildError(f"{what}: it must end in its one return statement, with a value")
+        procedure = not returns and targets is None  # (no value: its statements, called as a statement)
+        if not body or not (procedure or (isinstance(body[-1], ast.Return) and body[-1].value is not None
+                                          and len(returns) == 1)):
+            raise BuildError(f"{what}: it must end in its one return statement, with a value (or return nothing "
+                             "and be called as a statement)")
         if any(isinstance(n, nested) for n in ast.walk(fn) if n is not fn):
             raise BuildError(f"{what}: it nests a function, a generator or a global statement")
         count[0] += 1
@@ -427,6 +447,8 @@ def inline_source(stmts, functions, taken, where="inline_source"):
             def visit_Name(self, node):
                 return ast.copy_location(ast.Name(rename.get(node.id, node.id), node.ctx), node)
         body = [Rename().visit(s) for s in body]
+        if procedure:
+            return first + body
         last = ast.Assign(targets=targets, value=body[-1].value, lineno=0)
         return first + body[:-1] + [last]
 
@@ -436,8 +458,7 @@ def inline_source(stmts, functions, taken, where="inline_source"):
             value = s.value if isinstance(s, (ast.Assign, ast.Expr)) else None
             if (isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id in by_name
                     and value.func.id not in taken):
-                targets = s.targets if isinstance(s, ast.Assign) else [ast.Name("_", ast.Store())]
-                out += walk(paste(value, targets))
+                out += walk(paste(value, s.targets if isinstance(s, ast.Assign) else None))
                 continue
             for field in ("body", "orelse", "finalbody"):
                 inner = getattr(s, field, None)

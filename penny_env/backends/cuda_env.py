@@ -37,10 +37,13 @@ def torch_available_on_cuda() -> bool:
 class DeviceStep:
     """The device side of a PennyVectorEnv with backend="cuda" (see the module docstring)."""
 
-    def __init__(self, env, device=None, outputs="torch"):
+    def __init__(self, env, device=None, outputs="torch", kernels="split"):
         from numba import cuda
         if outputs not in ("torch", "numpy", "device"):
             raise ValueError(f"outputs must be 'torch', 'device' or 'numpy', got {outputs!r}")
+        if kernels not in ("split", "one"):
+            raise ValueError(f"kernels must be 'split' (a fast kernel for impact-free steps and one for the rest) or "
+                             f"'one', got {kernels!r}")
         if outputs == "torch" and not torch_available_on_cuda():
             raise ValueError("outputs='torch' needs torch with CUDA; pass outputs='numpy' for numpy arrays")
         if device is not None:
@@ -71,8 +74,19 @@ class DeviceStep:
         self.reset_obs = self._alloc_output((n, d), np.float32)
         self.parity = 0
         self.masks = self._view(self._upload(np.ones(n, dtype=bool), output=True))
-        kernel = self.fns.step_envs
-        self.launches = [kernel.prepare(self.st, self.actions, self.consts, out, buf) for out, buf in self.sets]
+        self.kernels = kernels
+        self.work = alloc(n, np.int64)      # the rare kernel's list of envs (backends/env.py, fast_step_env)
+        self.work_counts = alloc(2, np.int64)  # its length, one per output set
+        p, m, k = env._p, env._m, core.k
+        if kernels == "split":
+            self.launches = [(self.fns.fast_step_envs.prepare(self.st, self.actions, p, m, k, out, buf, self.work,
+                                                              self.work_counts, slot),
+                              self.fns.rare_step_envs.prepare(self.st, self.actions, p, m, k, out, buf, self.work,
+                                                              self.work_counts, slot))
+                             for slot, (out, buf) in enumerate(self.sets)]
+        else:
+            self.launches = [(self.fns.step_envs.prepare(self.st, self.actions, self.consts, out, buf),)
+                             for out, buf in self.sets]
         self.views = [(StepResults(*map(self._view, out)), ImpactBuffers(*map(self._view, buf))) for out, buf in self.sets]
         self._streams = {}
 
@@ -172,8 +186,10 @@ class DeviceStep:
         return self._act_t
 
     def launch(self, parity):
-        """The step kernel on output set ``parity`` (prepared once), on the current stream."""
-        self.launches[parity].launch(self.stream())
+        """The step's kernels on output set ``parity`` (prepared once), on the current stream."""
+        stream = self.stream()
+        for launch in self.launches[parity]:
+            launch.launch(stream)
 
     def step(self, actions):
         """env.step on the device (module docstring); returns env.step's tuple in the outputs' type."""

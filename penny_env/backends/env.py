@@ -14,8 +14,12 @@ from pathlib import Path
 from typing import Callable, NamedTuple
 
 from ..envs import draws, functional
-from ..envs.functional import (EnvState, PennyState, StepResults, angle_trig, distance, env_step, initial_state,
-                               observe_rows, reset_rows, step_env, step_envs, write_observation)
+import math
+
+from ..envs.functional import (NEXT_STEP, SAME_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots,
+                               conclude, distance, env_row, env_step, initial_state, limit_of, observe_row, observe_rows,
+                               reset_row, reset_rows, same_step_reset, step_env, step_envs, write_observation,
+                               write_outputs, write_state)
 from ..physics.scalar import ImpactBuffers
 from . import cache, generated, packing
 from .builder import Builder, check_target
@@ -27,7 +31,8 @@ prange = range  # the loops below are kernels on CUDA (backends/builder.py)
 class EnvEntryPoints(NamedTuple):
     """The compiled env step of one (target, table kind, task). Single env: ``env_step``, ``initial_state``,
     ``observe_state``; vector env: ``step_envs``, ``reset_rows``, ``observe_rows`` (CPU and python: plain
-    callables; CUDA: builder.CudaLoop kernels). ``unpack``: the plain unpacker of the constants."""
+    callables; CUDA: builder.CudaLoop kernels), and on CUDA ``fast_step_envs`` and ``rare_step_envs``, the
+    step in two kernels (module comment there). ``unpack``: the plain unpacker of the constants."""
 
     target: str
     env_step: Callable
@@ -37,6 +42,8 @@ class EnvEntryPoints(NamedTuple):
     reset_rows: Callable
     observe_rows: Callable
     unpack: Callable
+    fast_step_envs: Callable = None
+    rare_step_envs: Callable = None
 
 
 # -- the entry points' bodies (plain Python; copied into each build) ------------------------------------------
@@ -99,7 +106,7 @@ def step_envs_device(st, actions, consts, out, buf):
 
 def reset_row_device(j, rows, st, consts, obs):
     p, m, k = unpack(consts)  # noqa: F821
-    functional.reset_row(j, rows, st, p, m, k, obs)
+    reset_row(j, rows, st, p, m, k, obs)
 
 
 def reset_rows_device(rows, st, consts, obs):
@@ -109,12 +116,80 @@ def reset_rows_device(rows, st, consts, obs):
 
 def observe_row_device(j, rows, st, consts, obs):
     p, m, k = unpack(consts)  # noqa: F821
-    functional.observe_row(j, rows, st, p, m, k, obs)
+    observe_row(j, rows, st, p, m, k, obs)
 
 
 def observe_rows_device(rows, st, consts, obs):
     for j in prange(rows.shape[0]):
         observe_row_device(j, rows, st, consts, obs)
+
+
+# -- the GPU's vector step in two kernels: the common, impact-free step, and the rest ---------------------------------
+# A kernel's registers are those of its heaviest path: with the event loop and the reset's draws in it, the step
+# kernel needs about 250 per thread (an eighth of an H100's threads resident). The fast kernel runs what most
+# envs do at most steps, a period the certificate shows free of impacts (scalar.certified_free_trig: then
+# run_interval is one flow), with the same functions in the same order as step_env; the envs it cannot finish
+# (an impact search, a NEXT_STEP reset, a non-finite action; SAME_STEP's reset after a finished step) go on a
+# list that the rare kernel, one thread per listed env, finishes with step_env itself (or same_step_reset).
+FULL_STEP, RESET_ONLY = 0, 1
+
+
+def enqueue(work, counts, slot, i, what):
+    """Env i onto the rare kernel's list (atomic: threads append concurrently)."""
+    j = cuda.atomic.add(counts, slot, 1)  # noqa: F821 (numba.cuda, in the CUDA build's namespace)
+    work[j] = 2 * i + what
+
+
+def fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot):
+    """Env i's step where it is a certified impact-free period (module comment above), else onto the list."""
+    if i == 0:
+        counts[1 - slot] = 0  # the other output set's list, for the next step (its rare kernel has run)
+    pending = st[10]
+    obs = out[0]
+    clear_slots(i, buf)
+    if p.autoreset == NEXT_STEP and pending[i]:
+        enqueue(work, counts, slot, i, FULL_STEP)
+    else:
+        st_i = env_row(st, i)
+        a0 = actions[i, 0]
+        a1 = actions[i, 1] if p.n_act == 2 else 0.0
+        if math.isfinite(a0) and math.isfinite(a1):
+            acc1, acc2, ctrl = actuate(a0, a1, p)
+            if p.plane or certified_free_trig(st_i.s, st_i.trig[2], st_i.trig[3], acc1, acc2, p.dt, m):  # noqa: F821
+                s1 = flow1(st_i.s, acc1, acc2, p.dt, m.R)  # noqa: F821
+                new, r, te, tu, e, lim = conclude(st_i, s1, p.dt, limit_of(s1, p.dt, p), ctrl, 0, p, k, obs, i)
+                write_state(st, i, new)
+                write_outputs(out, i, new, r, te, tu, e, lim)
+                done = te or tu
+                if p.autoreset == NEXT_STEP:
+                    pending[i] = done
+                elif p.autoreset == SAME_STEP and done:
+                    enqueue(work, counts, slot, i, RESET_ONLY)
+            else:
+                enqueue(work, counts, slot, i, FULL_STEP)
+        else:
+            enqueue(work, counts, slot, i, FULL_STEP)
+
+
+def fast_step_envs(st, actions, p, m, k, out, buf, work, counts, slot):
+    for i in prange(st.S.shape[1]):
+        fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot)
+
+
+def rare_step_env(j, st, actions, p, m, k, out, buf, work, counts, slot):
+    """Entry j of the list the fast kernel made: step_env for the env, or SAME_STEP's reset alone."""
+    if j < counts[slot]:
+        entry = work[j]
+        i = entry // 2
+        if entry - 2 * i == FULL_STEP:
+            step_env(i, st, actions, p, m, k, out, buf)
+        else:
+            same_step_reset(st, i, p, m, k, out)
+
+
+def rare_step_envs(st, actions, p, m, k, out, buf, work, counts, slot):
+    for j in prange(st.S.shape[1]):
+        rare_step_env(j, st, actions, p, m, k, out, buf, work, counts, slot)
 
 
 def _vector_count(args):
@@ -126,6 +201,11 @@ def _rows_count(args):
 
 
 # -- the build ---------------------------------------------------------------------------------------------------
+# the functions the CPU's vector loop has pasted in at the source level (builder.inline_source): every array they
+# take from the records is then taken once, before the loop, and none is passed to a call per env
+STEP_PASTED = (functional.clear_slots, functional.clear_row, env_step, functional.transition, functional.run_interval,
+               functional.conclude, functional.pending_reset, functional.finish_env, functional.write_outputs,
+               functional.write_state, functional.same_step_reset, functional.reset_env)
 _ENTRY: dict = {}  # (target, variant_key(kind), task record, constants type) -> EnvEntryPoints
 
 
@@ -143,7 +223,7 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     Model.kind of the constants they will receive: the compiled physics calls that table's formulas whatever
     Model.kind says; the python target runs any), the task ``record`` (envs/tasks/) and its constants' type.
     Built once per process and key; fresh: build anew, keep nothing (the PTX tests). max_registers: CUDA's
-    per-thread register cap of the step kernel (None: the compiler's choice)."""
+    per-thread register cap of the fast step kernel (None: the compiler's choice)."""
     target = check_target(target)
     kind = -1 if target == "python" else check_kind(kind)
     key = (target, variant_key(kind), record, constants_type, max_registers)
@@ -181,17 +261,21 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     b.namespace.update(packing.record_names(records))
     b.copy(unpack, inline=True)
     b.copies((functional.clip_action, functional.angle_trig, functional.kinetic_energy, functional.distance,
-              functional.observation, functional.actuate, functional.termination, functional.initial_state))
+              functional.observation, functional.actuate, functional.termination, functional.initial_state,
+              functional.limit_of))
     # inlined: a call that passes arrays increments and decrements their reference counts, atomically
-    b.copies((functional.write_observation, functional.env_row, functional.write_state, functional.reset_env),
-             inline=True)
+    b.copies((functional.write_observation, functional.env_row, functional.write_state, functional.reset_env,
+              functional.clear_slots, functional.write_outputs, functional.pending_reset, functional.same_step_reset,
+              functional.finish_env, functional.conclude), inline=True)
     if target == "cuda":
+        b.namespace.update(FULL_STEP=FULL_STEP, RESET_ONLY=RESET_ONLY, math=math)
         b.copies((functional.transition, env_step, step_env, functional.reset_row, functional.observe_row,
-                  step_env_device, reset_row_device, observe_row_device))
-        step = b.kernel(step_envs_device, max_registers=max_registers)
+                  step_env_device, reset_row_device, observe_row_device, enqueue, fast_step_env, rare_step_env))
+        step = b.kernel(step_envs_device)
         resets = b.kernel(reset_rows_device)
         observes = b.kernel(observe_rows_device)
         single = initial = observe_state = None
+        fast, rare = b.kernel(fast_step_envs, max_registers=max_registers), b.kernel(rare_step_envs)
     else:
         # inlined into the entries and the loop: called as functions, their many arguments cost more than
         # their work (the loop's bodies write by position, see functional.write_state)
@@ -202,11 +286,11 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
         b.copies((step_env, functional.reset_row, functional.observe_row), inline=True)
         # one parallel call at a time (threads.locked), serially for few envs or in a forked child; the step
         # and the event loop's driver pasted into the loop (builder.inline_source)
-        step = b.loop(step_envs, entry=step_envs_packed, count=_vector_count,
-                      inline=(env_step, functional.transition, functional.run_interval))
+        step = b.loop(step_envs, entry=step_envs_packed, count=_vector_count, inline=STEP_PASTED)
         resets = b.loop(reset_rows, entry=reset_rows_packed, count=_rows_count)
         observes = b.loop(observe_rows, entry=observe_rows_packed, count=_rows_count)
-    out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack)
+        fast = rare = None
+    out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack, fast, rare)
     if not fresh:
         _ENTRY[key] = out
     return out

@@ -226,17 +226,22 @@ def transition(st, acc1, acc2, p, m, k, buf, row):
     """Stage "transition": the penny over one control period (scalar.run_interval, one call of the event
     loop: its per-call event cap, m.max_events impacts, bounds the step's work; the impacts go into row
     ``row`` of the ImpactBuffers buf, those on the task's marked arc counted there too). Returns (state,
-    elapsed, limit): LIMIT_IMPACTS when the period needed more than the cap's impacts (the state is then
-    the one at elapsed < dt), LIMIT_SPEED when |theta_dot| > W_max or |phi_dot| > w_max (a further step
-    could pass MAX_ANGULAR_SPEED). The motion is never altered."""
+    elapsed, limit) (:func:`limit_of`). The motion is never altered."""
     s1, elapsed = run_interval(st.s, st.trig[2], st.trig[3], acc1, acc2, p.dt, m, p.plane, False, 0, buf, row,
                                task_marked_arc(k, st))  # noqa: F821
+    return s1, elapsed, limit_of(s1, elapsed, p)
+
+
+def limit_of(s1, elapsed, p):
+    """The documented limit a period reached: LIMIT_IMPACTS when it needed more than the event cap's impacts
+    (the state is then the one at elapsed < dt), LIMIT_SPEED when |theta_dot| > W_max or |phi_dot| > w_max
+    (a further step could pass MAX_ANGULAR_SPEED), else LIMIT_NONE."""
     limit = LIMIT_NONE
     if elapsed < p.dt:
         limit = LIMIT_IMPACTS
     elif abs(s1[4]) > p.W_max or abs(s1[5]) > p.w_max:
         limit = LIMIT_SPEED
-    return s1, elapsed, limit
+    return limit
 
 
 def termination(after, success, limit, p):
@@ -276,19 +281,24 @@ def write_observation(obs, i, st, p, k):
     task_observation(k, st, obs, i)  # noqa: F821
 
 
-def env_step(st, a0, a1, p, m, k, buf, row, obs, i):
-    """One step of one env from PennyState st: the stages in order; the observation goes into row i of obs,
-    the impacts into row ``row`` of buf. Returns (new PennyState, reward, terminated, truncated, kinetic
-    energy, limit)."""
-    acc1, acc2, ctrl = actuate(a0, a1, p)
-    s1, elapsed, limit = transition(st, acc1, acc2, p, m, k, buf, row)
-    n_arc = buf.arc_count[row]
+def conclude(st, s1, elapsed, limit, ctrl, n_arc, p, k, obs, i):
+    """The stages after the transition from PennyState st to state s1: reward, termination and observation
+    (into row i of obs). Returns (new PennyState, reward, terminated, truncated, kinetic energy, limit)."""
     new = PennyState(s1, angle_trig(s1), st.target, st.arc, st.count + n_arc, distance(s1, st.target), st.steps + 1,
                      st.time + elapsed)
     r, success = task_reward(k, st, new, ctrl, n_arc, XP)  # noqa: F821
     terminated, truncated = termination(new, success, limit, p)
     write_observation(obs, i, new, p, k)
     return new, r, terminated, truncated, kinetic_energy(s1, p), limit
+
+
+def env_step(st, a0, a1, p, m, k, buf, row, obs, i):
+    """One step of one env from PennyState st: the stages in order; the observation goes into row i of obs,
+    the impacts into row ``row`` of buf. Returns (new PennyState, reward, terminated, truncated, kinetic
+    energy, limit)."""
+    acc1, acc2, ctrl = actuate(a0, a1, p)
+    s1, elapsed, limit = transition(st, acc1, acc2, p, m, k, buf, row)
+    return conclude(st, s1, elapsed, limit, ctrl, buf.arc_count[row], p, k, obs, i)
 
 
 # -- the vector step: one env of N, autoreset included -------------------------------------------------------
@@ -335,15 +345,22 @@ def reset_env(st, i, p, m, k):
     return new
 
 
-def step_env(i, st, actions, p, m, k, out, buf):
-    """Env i of the vector step, in place (the per-env body of :func:`step_envs`): NEXT_STEP's pending reset,
-    or env_step with SAME_STEP's reset of an ended episode; the outputs into row i of out (StepResults), the
-    impacts into row i of buf (the info's times NaN-padded and ends 0-padded past the count: the slots this
-    row filled at the buffer's last use are cleared first, so a row costs what it holds). A non-finite action
-    (which the host refuses before the step on the CPU; the GPU checks it here, without a round trip) ends
-    the env's episode unstepped: truncated, LIMIT_ACTION."""
-    pending = st[10]
-    obs = out[0]
+def clear_slots(i, buf):
+    """Env i's impact slots emptied before a step writes them: the info's times NaN-padded and ends 0-padded
+    past the count (only the slots the row filled at the buffer's last use, so a row costs what it held; a
+    fresh buffer's counts start at its capacity), then its counts set to 0 (scalar.clear_row)."""
+    counts = buf[0]
+    times = buf[1]
+    ends = buf[2]
+    for j in range(min(counts[i], times.shape[0])):
+        times[j, i] = np.nan
+        ends[j, i] = 0
+    clear_row(buf, i)
+
+
+def write_outputs(out, i, new, r, te, tu, e, lim):
+    """Row i of the step's outputs (StepResults) from a step's results; the info's time, distance and arc
+    count of PennyState new."""
     reward = out[1]
     terminated = out[2]
     truncated = out[3]
@@ -352,35 +369,69 @@ def step_env(i, st, actions, p, m, k, out, buf):
     info_time = out[6]
     info_dist = out[7]
     info_count = out[8]
-    final_obs = out[9]
     ended = out[10]
-    counts = buf[0]
-    times = buf[1]
-    ends = buf[2]
-    for j in range(min(counts[i], times.shape[0])):
-        times[j, i] = np.nan
-        ends[j, i] = 0
-    clear_row(buf, i)
+    reward[i] = r
+    terminated[i] = te
+    truncated[i] = tu
+    energy[i] = e
+    limit[i] = lim
+    info_time[i] = new.time
+    info_dist[i] = new.dist
+    info_count[i] = new.count
+    ended[i] = te or tu
+
+
+def pending_reset(st, i, p, m, k, out):
+    """NEXT_STEP: env i, whose episode ended at the last step, starts its next one at this step: its
+    observation is the reset's, reward 0, no flags, no impacts."""
+    pending = st[10]
+    new = reset_env(st, i, p, m, k)
+    pending[i] = False
+    write_observation(out[0], i, new, p, k)
+    write_outputs(out, i, new, 0.0, False, False, kinetic_energy(new.s, p), LIMIT_NONE)
+
+
+def same_step_reset(st, i, p, m, k, out):
+    """SAME_STEP: env i's episode ended at this step: its last observation goes to final_obs, it starts its
+    next episode, and its observation is the reset's (the other outputs stay the ended step's)."""
+    obs = out[0]
+    final_obs = out[9]
+    for j in range(obs.shape[1]):
+        final_obs[i, j] = obs[i, j]
+    fresh = reset_env(st, i, p, m, k)
+    write_observation(obs, i, fresh, p, k)
+
+
+def finish_env(st, i, new, r, te, tu, e, lim, p, m, k, out):
+    """Env i's step results stored (state, outputs) and the autoreset's bookkeeping: NEXT_STEP marks an ended
+    episode for reset at the next step, SAME_STEP resets it now."""
+    pending = st[10]
+    write_state(st, i, new)
+    write_outputs(out, i, new, r, te, tu, e, lim)
+    done = te or tu
+    if p.autoreset == NEXT_STEP:
+        pending[i] = done
+    elif p.autoreset == SAME_STEP and done:
+        same_step_reset(st, i, p, m, k, out)
+
+
+def step_env(i, st, actions, p, m, k, out, buf):
+    """Env i of the vector step, in place (the per-env body of :func:`step_envs`): NEXT_STEP's pending reset,
+    or env_step with SAME_STEP's reset of an ended episode; the outputs into row i of out (StepResults), the
+    impacts into row i of buf (:func:`clear_slots`). A non-finite action (which the host refuses before the
+    step on the CPU; a GPU meets it here, without a round trip) ends the env's episode unstepped:
+    truncated, LIMIT_ACTION."""
+    pending = st[10]
+    obs = out[0]
+    clear_slots(i, buf)
     if p.autoreset == NEXT_STEP and pending[i]:
-        new = reset_env(st, i, p, m, k)
-        pending[i] = False
-        write_observation(obs, i, new, p, k)
-        reward[i] = 0.0
-        terminated[i] = False
-        truncated[i] = False
-        energy[i] = kinetic_energy(new.s, p)
-        limit[i] = LIMIT_NONE
-        info_time[i] = new.time
-        info_dist[i] = new.dist
-        info_count[i] = new.count
-        ended[i] = False
+        pending_reset(st, i, p, m, k, out)
     else:
         st_i = env_row(st, i)
         a0 = actions[i, 0]
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
         if math.isfinite(a0) and math.isfinite(a1):
             new, r, te, tu, e, lim = env_step(st_i, a0, a1, p, m, k, buf, i, obs, i)
-            write_state(st, i, new)
         else:
             new = st_i
             r = 0.0
@@ -389,23 +440,7 @@ def step_env(i, st, actions, p, m, k, out, buf):
             e = kinetic_energy(st_i.s, p)
             lim = LIMIT_ACTION
             write_observation(obs, i, new, p, k)
-        reward[i] = r
-        terminated[i] = te
-        truncated[i] = tu
-        energy[i] = e
-        limit[i] = lim
-        info_time[i] = new.time  # (the ended episode's, under SAME_STEP too)
-        info_dist[i] = new.dist
-        info_count[i] = new.count
-        done = te or tu
-        ended[i] = done
-        if p.autoreset == NEXT_STEP:
-            pending[i] = done
-        elif p.autoreset == SAME_STEP and done:
-            for j in range(obs.shape[1]):
-                final_obs[i, j] = obs[i, j]
-            fresh = reset_env(st, i, p, m, k)
-            write_observation(obs, i, fresh, p, k)
+        finish_env(st, i, new, r, te, tu, e, lim, p, m, k, out)
 
 
 def step_envs(st, actions, p, m, k, out, buf):

@@ -104,7 +104,8 @@ class PennyVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scene="ellipse", task="reach", max_episode_steps=None,
                  autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto",
-                 max_impacts_in_info: int = MAX_IMPACTS_IN_INFO, device=None, outputs=None, **overrides):
+                 max_impacts_in_info: int = MAX_IMPACTS_IN_INFO, device=None, outputs=None, cuda_options=None,
+                 **overrides):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be a positive integer, got {type(num_envs).__name__}")
         if num_envs < 1:
@@ -125,13 +126,17 @@ class PennyVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         if backend not in ("auto", "numba", "python", "cuda"):
             raise ValueError(f"backend must be 'auto', 'numba', 'python' or 'cuda', got {backend!r}")
-        if outputs not in (None, "numpy", "torch"):
-            raise ValueError(f"outputs must be None, 'numpy' or 'torch', got {outputs!r}")
-        if backend not in ("auto", "cuda") and (device is not None or outputs == "torch"):
+        if outputs not in (None, "numpy", "torch", "device"):
+            raise ValueError(f"outputs must be None, 'numpy', 'torch' or 'device', got {outputs!r}")
+        if backend not in ("auto", "cuda") and (device is not None or outputs in ("torch", "device")):
             raise ValueError(f"device and outputs='torch' need backend='cuda' (or 'auto' on a GPU), got backend={backend!r}")
+        if cuda_options is not None and (not isinstance(cuda_options, dict)
+                                         or set(cuda_options) - {"kernels", "max_registers"}):
+            raise ValueError(f"cuda_options must be a dict with keys 'kernels' and 'max_registers', got {cuda_options!r}")
         self.backend = backend
         self.device = device
         self.outputs = outputs
+        self.cuda_options = dict(cuda_options or {})
         self.render_mode = render_mode
         self.autoreset_mode = autoreset_mode
         self.max_impacts_in_info = int(max_impacts_in_info)
@@ -186,8 +191,8 @@ class PennyVectorEnv(VectorEnv):
         if on_gpu:
             from ..backends.cuda_env import DeviceStep
             outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
-            self._fns = core.entry_points("cuda")
-            self._gpu = DeviceStep(self, self.device, outputs)
+            self._fns = core.entry_points("cuda", max_registers=self.cuda_options.get("max_registers"))
+            self._gpu = DeviceStep(self, self.device, outputs, self.cuda_options.get("kernels", "split"))
             return core
         self._fns = core.entry_points()
         # fewer envs than threads.SERIAL_BELOW: the serial loop, called directly (threads.locked)
