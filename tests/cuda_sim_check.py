@@ -1,10 +1,13 @@
 """Run under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1) by tests/test_cuda.py: the CUDA backend of the
-vector env and of penny_env.batch against the CPU backend, over rollouts with many impacts on every scene
-preset. Prints one JSON line per case; exits non-zero on the first mismatch."""
+vector env and of penny_env.batch against the CPU backend, over rollouts with many impacts and episode ends on
+every scene preset and in every autoreset mode. Prints one JSON line per case; exits non-zero on the first
+mismatch."""
 import json
 import sys
 
 import numpy as np
+
+from gymnasium.vector import AutoresetMode
 
 import penny_env.batch as pb
 from penny_env import PennyVectorEnv
@@ -21,31 +24,47 @@ def rel_close(a, b, rel=1e-12):
         return bool(np.all(same | (np.abs(a - b) <= rel * np.maximum(np.abs(a), np.abs(b)))))
 
 
-def vector_case(scene, task, law, n, steps):
+def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernels="split", episode_steps=12):
+    """The CPU and the CUDA backend (numpy outputs) over ``steps`` steps of short episodes (``episode_steps``), so
+    that the autoreset of ``mode`` runs on the device many times: every output equal, DISABLED's resets through
+    reset_mask."""
     kw = {} if scene == "plane" else {"law": law}
-    cpu = PennyVectorEnv(n, scene, task, backend="numba", **kw)
-    gpu = PennyVectorEnv(n, scene, task, backend="cuda", outputs="numpy", **kw)
+    cpu = PennyVectorEnv(n, scene, task, backend="numba", autoreset_mode=mode, max_episode_steps=episode_steps, **kw)
+    gpu = PennyVectorEnv(n, scene, task, backend="cuda", outputs="numpy", autoreset_mode=mode,
+                         max_episode_steps=episode_steps, cuda_options={"kernels": kernels}, **kw)
     oc, _ = cpu.reset(seed=7)
     og, _ = gpu.reset(seed=7)
     assert np.array_equal(oc, og), "reset observations differ"
     rng = np.random.default_rng(1)
-    impacts = ends = 0
+    impacts = ends = resets = 0
     for k in range(steps):
         a = np.clip(rng.normal(0.6, 0.5, (n, cpu.single_action_space.shape[0])), -1, 1)
         rc, rg = cpu.step(a), gpu.step(a)
         assert rel_close(rc[0], rg[0]) and rel_close(rc[1], rg[1]), f"step {k}: observations or rewards differ"
         assert np.array_equal(rc[2], rg[2]) and np.array_equal(rc[3], rg[3]), f"step {k}: flags differ"
         ic, ig = rc[4], rg[4]
+        assert set(ic) == set(ig), f"step {k}: info keys differ"
         assert np.array_equal(ic["impacts"], ig["impacts"]), f"step {k}: impact counts differ"
         assert np.array_equal(ic["impact_ends"], ig["impact_ends"]), f"step {k}: impact ends differ"
         for key in ("impact_times", "kinetic_energy", "time", "distance"):
             assert rel_close(ic[key], ig[key]), f"step {k}: info[{key!r}] differs"
         assert np.array_equal(ic["limit"], ig["limit"])
+        if "final_obs" in ic:
+            assert np.array_equal(ic["_final_obs"], ig["_final_obs"])
+            for i in np.flatnonzero(ic["_final_obs"]):
+                assert np.array_equal(ic["final_obs"][i], ig["final_obs"][i]), f"step {k}: final_obs differs"
+        done = rc[2] | rc[3]
+        resets += int(done.sum())
+        if mode == AutoresetMode.DISABLED and done.any():
+            oc, _ = cpu.reset(options={"reset_mask": done})
+            og, _ = gpu.reset(options={"reset_mask": done})
+            assert np.array_equal(oc, og), f"step {k}: masked reset observations differ"
         impacts += int(ic["impacts"].sum())
         ends += int((ic["impact_ends"] != 0).sum())
     assert rel_close(cpu.states, gpu.states), "final states differ"
     bitwise = bool(np.array_equal(cpu.states, gpu.states))
-    return {"case": f"vector {scene} {task} {law}", "impacts": impacts, "bitwise": bitwise}
+    return {"case": f"vector {scene} {task} {law} {mode.value} {kernels}", "impacts": impacts, "resets": resets,
+            "bitwise": bitwise}
 
 
 def batch_case(table, law):
@@ -70,6 +89,10 @@ def main():
     steps = int(sys.argv[1]) if len(sys.argv) > 1 else 40
     for scene, task, law in CASES:
         print(json.dumps(vector_case(scene, task, law, 6, steps)), flush=True)
+    # every autoreset mode, and the one-kernel step, across many episode ends
+    for mode in (AutoresetMode.SAME_STEP, AutoresetMode.DISABLED):
+        print(json.dumps(vector_case("stadium", "impacts", "elastic", 6, steps, mode)), flush=True)
+    print(json.dumps(vector_case("circle", "park", 0.5, 6, steps, AutoresetMode.SAME_STEP, "one")), flush=True)
     for table, law in ((Ellipse(0.15, 0.2), "elastic"), (Stadium(0.1, 0.15), "plastic"), (Circle(0.12), 0.5)):
         print(json.dumps(batch_case(table, law)), flush=True)
 

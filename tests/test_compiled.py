@@ -9,7 +9,9 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 import penny_env as pe
 from penny_env.physics import advance_pennies, flow
-from penny_env.physics.compiled import IMPACT_CAPACITY, CompiledBatch, available, compiled_functions
+from penny_env.backends import batch_entry_points
+from penny_env.backends.batch import IMPACT_CAPACITY, CompiledBatch
+from penny_env.backends.choice import available
 from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis_small
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import SolverSettings
@@ -71,7 +73,7 @@ def test_compiled_flow_on_the_plane_equals_numpy_flow(seed, steer):
     out, log = CompiledBatch(pe.PennyParams(), None, make_law("elastic"), SET).states_and_impacts(S, acc1, acc2, 0.37)
     assert log is None
     assert np.array_equal(out, flow(S, acc1, acc2, 0.37, 0.01))
-    fns = compiled_functions(-1)  # the open plane's variant
+    fns = batch_entry_points("cpu", -1).functions  # the open plane's variant
     assert fns["flow1"](tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01) == flow1(tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01)
 
 
@@ -85,7 +87,7 @@ def test_small_angle_polynomials_match_libm(cis, limit, u):
     arr = np.array([z, -z, 0.5 * z])
     ca, sa = cis(arr)
     assert ca[0] == c and sa[0] == s  # numpy and floats: the same operations
-    cc, sc = compiled_functions(-1)[cis.__name__](z)
+    cc, sc = batch_entry_points("cpu", -1).functions[cis.__name__](z)
     assert cc == c and sc == s  # and compiled
 
 
@@ -133,14 +135,14 @@ def test_first_impacts_compiled_equal_python(table):
 
 
 def test_compiled_functions_take_a_table_kind_and_name_each_variant_apart():
-    from penny_env.physics import compiled
+    from penny_env.backends import physics as compiled
     from penny_env.physics.tables import COMPILED_FORMULAS
     with pytest.raises(TypeError, match="kind"):
-        compiled.compiled_functions(True)
+        batch_entry_points("cpu", True)
     with pytest.raises(ValueError, match="kind"):
-        compiled.compiled_functions(len(COMPILED_FORMULAS))
+        batch_entry_points("cpu", len(COMPILED_FORMULAS))
     with pytest.raises(ValueError, match="kind"):
-        compiled.compiled_functions(-2)
+        batch_entry_points("cpu", -2)
     # numba's cache files are named after the variant: one name per kind, not the registry's index
     names = [compiled.variant_name(k) for k in range(-1, len(COMPILED_FORMULAS))]
     assert len(set(names)) == len(names) and "stadium_stadium_terms" in names

@@ -1,4 +1,4 @@
-"""The compile notice (physics/compiled.py's announce_compile) and the quick modes of the commands that
+"""The compile notice (backends/cache.py's announce_compile) and the quick modes of the commands that
 measure first-use compile time and the vector env beside a busy process."""
 import re
 import logging
@@ -9,7 +9,7 @@ numba = pytest.importorskip("numba")
 
 
 def test_the_compile_notice_is_one_line_once_and_only_when_numba_compiles(caplog):
-    from penny_env.physics import compiled
+    from penny_env.backends import cache as compiled
 
     def f(x):
         return x + 1
@@ -25,14 +25,13 @@ def test_the_compile_notice_is_one_line_once_and_only_when_numba_compiles(caplog
 
 
 def test_no_notice_when_the_machine_code_is_cached(caplog, tmp_path, monkeypatch):
-    from penny_env.physics import compiled
+    from penny_env.backends import cache as compiled
 
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))  # a fresh cache for this test's function
-    cached = numba.njit(cache=True)(compiled._no_wall)
+    cached = numba.njit(cache=True)(compiled._probe)
     assert compiled.compiles_now(cached) is True  # nothing cached yet
-    import numpy as np
-    assert np.isnan(numba.njit(cache=True)(compiled._no_wall)(0, 0.0, 0.0)[0])  # compiles and saves
-    again = numba.njit(cache=True)(compiled._no_wall)
+    assert numba.njit(cache=True)(compiled._probe)() == 0  # compiles and saves
+    again = numba.njit(cache=True)(compiled._probe)
     assert compiled.compiles_now(again) is False
     compiled._ANNOUNCED.discard(("cached entry", 98))
     with caplog.at_level(logging.WARNING, logger="penny_env"):
@@ -42,7 +41,7 @@ def test_no_notice_when_the_machine_code_is_cached(caplog, tmp_path, monkeypatch
 
 @pytest.mark.slow
 def test_compile_time_quick(capsys, reports_untouched):
-    from penny_env.analysis import compile_time
+    from devtools import compile_time
     compile_time.main(["--quick"])
     out = capsys.readouterr().out
     assert "| Plane | single |" in out and "Total cold CPU seconds per shape" in out
@@ -53,7 +52,7 @@ def test_compile_time_quick(capsys, reports_untouched):
 
 @pytest.mark.slow
 def test_contention_quick(capsys, reports_untouched):
-    from penny_env.analysis import contention
+    from devtools import contention
     contention.main(["--quick"])
     out = capsys.readouterr().out
     rows = [line for line in out.splitlines() if line.startswith("| penny_env default |") or line.startswith("| 1 thread |")]

@@ -12,7 +12,7 @@ import penny_env  # noqa: F401  (registers the ids)
 from penny_env import PennyEnv, PennyVectorEnv
 from penny_env.envs.core import MAX_RENDER_FPS, render_fps
 from penny_env.envs.scene import ConfigError
-from penny_env.physics.compiled import available
+from penny_env.backends.choice import available
 
 BACKENDS = ["numba", "python"] if available() else ["python"]
 
@@ -97,18 +97,18 @@ def test_interrupted_vector_step_needs_a_reset(backend):
     vec.reset(seed=0)
     for _ in range(2):
         _, _, _, trunc, _ = vec.step(a)
-    assert trunc.all() and np.all(vec._steps == 2)
+    assert trunc.all() and np.all(vec._st.steps == 2)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_interrupted_single_step_needs_a_reset(backend):
     env = PennyEnv(backend=backend)
     env.reset(seed=0)
-    env_step = env._fns["env_step"]
-    env._fns = dict(env._fns, env_step=_interrupting(env_step, lambda: None))
+    env_step = env._fns.env_step
+    env._fns = env._fns._replace(env_step=_interrupting(env_step, lambda: None))
     with pytest.raises(KeyboardInterrupt):
         env.step(np.zeros(2, np.float32))
-    env._fns = dict(env._fns, env_step=env_step)
+    env._fns = env._fns._replace(env_step=env_step)
     with pytest.raises(ResetNeeded, match="interrupted"):
         env.step(np.zeros(2, np.float32))
     env.reset(seed=0)

@@ -9,11 +9,12 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 from penny_env import PennyEnv, PennyVectorEnv
+from penny_env.backends import packing
 from penny_env.envs import functional
 from penny_env.envs.core import Core
 from penny_env.envs.scene import resolve
 from penny_env.physics import scalar
-from penny_env.physics.compiled import available
+from penny_env.backends.choice import available
 from penny_env.physics.scalar import scalar_model
 from penny_env.physics.params import PennyParams
 
@@ -60,7 +61,7 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
         s1, elapsed1 = scalar.run_interval(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p.dt, m, False, False, 0, buf,
                                            0, scalar.NO_ARC)
         n = int(buf.count[0])
-        times, ends = buf.time[0], buf.end[0]
+        times, ends = buf.time[:, 0], buf.end[:, 0]
         ref, imps, _, elapsed = scalar.advance_m(s, acc1, acc2, p.dt, m, 0)
         assert np.array_equal(_bits(s1), _bits(ref)) and n == len(imps) and elapsed == p.dt == elapsed1
         assert np.array_equal(_bits(times[:n]), _bits([i[0] for i in imps])) and list(ends[:n]) == [i[1] for i in imps]
@@ -75,12 +76,24 @@ def _penny_state(s, target=(0.01, 0.0)):
     return functional.PennyState(s, functional.angle_trig(s), target, (1.0, 0.0), 0, 0.05, 0, 0.0)
 
 
+def _step(entry, st, a0, a1, p, m, k, capacity):
+    """One env step through an entry point (backends/env.py): (new PennyState, reward, terminated, truncated,
+    energy, limit, buf)."""
+    obs, buf = np.zeros((1, 11), np.float32), scalar.impact_buffers(1, capacity)
+    out = entry.env_step(tuple(st), a0, a1, packing.pack(p, m, k), obs, tuple(buf))
+    s1, trig1, count, dist, steps, time = out[:6]
+    assert out[6] == buf.count[0]
+    new = functional.PennyState(s1, trig1, st[2], st[3], count, dist, steps, time)
+    return (new,) + tuple(out[7:]) + (obs, buf)
+
+
 def test_transition_stops_where_the_event_cap_stops_the_loop(monkeypatch):
     # the event loop's call (scalar.advance_into) stops after its per-call event cap (m.max_events impacts)
     # with elapsed < the time asked: the step does no more work (bounded work per step, issue 24.4), returns
     # that call's state and impacts, the motion up to there unaltered, the elapsed time, LIMIT_IMPACTS
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
     p = p._replace(n_act=2, gain2=3.0)  # action (0, 1): acc1 = 0, acc2 = 3 exactly
+    entry = core.entry_points("python")  # (its physics is scalar's own functions: the patch below reaches them)
     rng = np.random.default_rng(3)
     calls = []
     advance_into = scalar.advance_into
@@ -95,9 +108,8 @@ def test_transition_stops_where_the_event_cap_stops_the_loop(monkeypatch):
         ref, imps, _, elapsed = scalar.advance_m(s, 0.0, 3.0, p.dt, m, 1)
         with monkeypatch.context() as mp:
             mp.setattr(scalar, "advance_into", one_impact_per_call)
-            buf = scalar.impact_buffers(1, 200)
             calls.clear()
-            new, _, _, _, truncated, _, limit = functional.env_step(_penny_state(s), 0.0, 1.0, p, m, core.k, buf, 0)
+            new, _, _, truncated, _, limit, _, buf = _step(entry, _penny_state(s), 0.0, 1.0, p, m, core.k, 200)
         assert len(calls) == 1 and buf.count[0] == 1 and len(imps) == 1 and elapsed < p.dt
         assert np.array_equal(_bits(new.s), _bits(ref)) and new.time == elapsed
         assert truncated and limit == functional.LIMIT_IMPACTS
@@ -108,33 +120,26 @@ def test_transition_stops_where_the_event_cap_stops_the_loop(monkeypatch):
 
 # -- compiled and plain-Python steps agree (moved here from tests/test_compiled.py) -----------------
 @needs_numba
-@needs_numba
 def test_compiled_step_truncates_a_capped_period_as_the_plain_step_does():
     # an event loop stopped by its per-call cap (m.max_events impacts) ends the episode, truncated with
     # info "limit" LIMIT_IMPACTS at the state right after the cap's impact, in the compiled step as in
     # the plain one (the same numbers, bitwise), and those impacts are the first of an uncapped period
     core, p, m = _step_setup({"kind": "ellipse", "a": 0.03, "b": 0.011}, "elastic", 0.5)
     capped = m._replace(max_events=2)
-    fns = [functional.env_functions(b, m.kind)["env_step"] for b in ("numba", "python")]
+    entries = [core.entry_points(t) for t in ("cpu", "python")]
     rng = np.random.default_rng(5)
     checked = 0
     for s in _random_inside(rng, core.table, 20):
         s = s[:4] + (30.0, s[5])
-        st = tuple(_penny_state(s))
-        outs = []
-        for f, model in ((fns[0], capped), (fns[1], capped), (fns[1], m)):
-            obs, buf = np.zeros((1, 11), np.float32), scalar.impact_buffers(1, 64)
-            out = f(st, 0.2, 0.9, functional.pack(p, model, core.k), obs, tuple(buf))
-            s1, trig1, count, dist, steps, time = out[:6]
-            new = functional.PennyState(s1, trig1, st[2], st[3], count, dist, steps, time)
-            assert out[6] == buf.count[0]
-            outs.append((new, tuple(out[7:]), obs, buf))
-        (a, ra, obs_a, buf_a), (b, rb, obs_b, buf_b), (free, rf, _, buf_f) = outs
+        st = _penny_state(s)
+        outs = [_step(e, st, 0.2, 0.9, p, model, core.k, 64) for e, model in
+                ((entries[0], capped), (entries[1], capped), (entries[1], m))]
+        (a, *ra, obs_a, buf_a), (b, *rb, obs_b, buf_b), (free, *rf, _, buf_f) = outs
         assert np.array_equal(_bits(a.s), _bits(b.s)) and a[1:] == b[1:] and ra == rb
         assert np.array_equal(obs_a, obs_b) and all(np.array_equal(x, y) for x, y in zip(buf_a, buf_b))
         assert buf_f.count[0] > 2 and rf[4] == functional.LIMIT_NONE and free.time == p.dt and not rf[2]
         assert buf_b.count[0] == 2 and rb[2] and rb[4] == functional.LIMIT_IMPACTS and b.time < p.dt
-        assert b.time == buf_b.time[0, 1] and np.allclose(buf_b.time[0, :2], buf_f.time[0, :2], rtol=0, atol=1e-12)
+        assert b.time == buf_b.time[1, 0] and np.allclose(buf_b.time[:2, 0], buf_f.time[:2, 0], rtol=0, atol=1e-12)
         checked += 1
     assert checked == 20
 
@@ -215,8 +220,8 @@ def test_vector_info_has_fixed_width_and_exact_counts():
 
 
 def test_auto_falls_back_to_python_without_numba(monkeypatch):
-    from penny_env.physics import compiled
-    monkeypatch.setattr(compiled, "available", lambda: False)
+    from penny_env.backends import choice
+    monkeypatch.setattr(choice, "available", lambda: False)
     for cls in (PennyVectorEnv, PennyEnv):
         with pytest.warns(UserWarning, match="python"):
             assert cls(backend="auto")._core.backend == "python"
@@ -254,16 +259,16 @@ def test_single_env_backends_agree(kw):
 
 
 
-# -- the entry points' packing of the constants, and the CPU loop's hoisting ---------------------------------
+# -- the entry points' packing of the constants, and the CPU loop's source --------------------------------
 def test_pack_round_trips_every_field_exactly():
-    """pack() holds the 56 constants in one float64 array (ints and bools as int64 bits): unpack() gives
-    back the very records, the int64 range included (the single env's max_steps is int64's max)."""
+    """pack() holds the constants in one float64 array (ints and bools as int64 bits): the generated unpack()
+    gives back the very records, the int64 range included (the single env's max_steps is int64's max)."""
     core = Core(*resolve("stadium", "impacts"), backend="python")
     p = functional.env_params(core, np.iinfo(np.int64).max)
     m = scalar_model(core.params, core.table, core.law, core.settings)
-    c = functional.pack(p, m, core.k)
+    c = packing.pack(p, m, core.k)
     assert c.dtype == np.float64 and c.shape == (len(p) + len(m) + len(core.k),)
-    p2, m2, k2 = functional.unpack(c)
+    p2, m2, k2 = packing.unpacker((type(p), type(m), type(core.k)))(c)
     assert (p2, m2, k2) == (p, m, core.k)
     assert p2.max_steps == np.iinfo(np.int64).max and type(p2.max_steps) is int and type(p2.plane) is bool
     for rec, back in ((p, p2), (m, m2), (core.k, k2)):
@@ -272,8 +277,6 @@ def test_pack_round_trips_every_field_exactly():
             assert type(a) is type(b), name
             if isinstance(a, float):
                 assert _bits(a) == _bits(b), name
-    with pytest.raises(ValueError, match="56 fields"):
-        functional.pack(p, m, ())
 
 
 def test_pack_refuses_a_field_it_cannot_hold():
@@ -283,24 +286,115 @@ def test_pack_refuses_a_field_it_cannot_hold():
         x: float
         name: str
     with pytest.raises(TypeError, match="Named.name"):
-        functional._field_kinds((Named,))
+        packing.field_kinds((Named,))
+
+
+def test_unpack_is_defined_from_a_real_file():
+    """Nothing is defined by exec where a reader cannot find it: the unpacker's code comes from a generated file
+    on disk that holds its source."""
+    core = Core(*resolve("ellipse", "reach"), backend="python")
+    m = scalar_model(core.params, core.table, core.law, core.settings)
+    unpack = packing.unpacker((functional.EnvParams, type(m), type(core.k)))
+    path = unpack.__code__.co_filename
+    with open(path) as f:
+        assert "def unpack(c):" in f.read()
+
+
+def _loop_extractions(source):
+    """The statements NAME = ARG[INT] inside and before the loop of a hoisted loop's source."""
+    import ast
+    fn = ast.parse(source).body[0]
+    params = {a.arg for a in fn.args.args}
+    loop = next(s for s in fn.body if isinstance(s, ast.For))
+
+    def is_extraction(n):
+        return (isinstance(n, ast.Assign) and isinstance(n.value, ast.Subscript) and isinstance(n.value.value, ast.Name)
+                and n.value.value.id in params and isinstance(n.value.slice, ast.Constant))
+    before = [s for s in fn.body[:fn.body.index(loop)] if is_extraction(s)]
+    inside = [n for n in ast.walk(loop) if is_extraction(n)]
+    calls = {n.func.id for n in ast.walk(loop) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+    return before, inside, calls, loop
 
 
 def test_cpu_loop_takes_the_record_arrays_once_before_the_loop():
-    """builder.hoisted_source: the vector step's CPU loop has step_env's statements in place, its 14
-    extractions (S = st[0], ...) before the loop (numba counts references per extraction and penny
-    otherwise); a body that returns, or one whose parameters are not (index, the loop's), is not hoisted."""
+    """builder.hoisted_source: the vector step's CPU loop has step_env's statements in place, and every array
+    taken from the records (also by the functions pasted in, in any branch) is taken before the loop (numba
+    counts references per extraction and penny otherwise); the loop calls none of the pasted functions."""
+    from penny_env.backends.builder import hoisted_source
+    from penny_env.backends.env import STEP_PASTED
+    src = hoisted_source(functional.step_envs, functional.step_env, STEP_PASTED)
+    before, inside, calls, loop = _loop_extractions(src)
+    assert len(before) >= 14 and inside == []
+    assert loop.iter.func.id == "prange" and loop.target.id == "i"
+    assert calls.isdisjoint({f.__name__ for f in STEP_PASTED}) and "advance_into" in calls and "step_env" not in calls
+
+
+def _double_and_count(v, out, j):
+    """(test helper for the source inliner) one return, at the end."""
+    w = v * 2.0
+    if w > 1.0:
+        out[j] = w
+    else:
+        w = -w
+    return w, j + 1
+
+
+def _note(out, j, v):
+    """(test helper) a procedure: no return, its array taken from a record."""
+    arr = out[0]
+    arr[j] = v
+
+
+def _two_returns(v, out, j):
+    if v > 0:
+        return v
+    return -v
+
+
+def _loop_body(i, X, out, total):
+    v = X[i]
+    w, n = _double_and_count(v, out[1], i)
+    if w > 0.0:
+        _note(out, i, w + n)
+    total[i] = w + n
+
+
+def _loop(X, out, total):
+    for i in prange(X.shape[0]):  # noqa: F821 (range in the scope the test runs it in)
+        _loop_body(i, X, out, total)
+
+
+def test_source_inliner_pastes_calls_and_the_pasted_loop_computes_the_same():
+    """builder.inline_source: functions pasted in (with one final return, or none at all), their array arguments
+    under the caller's own names, their extractions hoisted; the pasted loop computes what the original
+    computes; a function that cannot be pasted, or one that is never called, is a BuildError naming it."""
     import ast
 
-    from penny_env.physics.builder import hoisted_loop, hoisted_source
-    src = hoisted_source(functional.step_envs, functional.step_env)
-    fn = ast.parse(src).body[0]
-    loop_at = next(j for j, s in enumerate(fn.body) if isinstance(s, ast.For))
-    before = [ast.unparse(s) for s in fn.body[:loop_at]]
-    assert len(before) == 14 and "S = st[0]" in before and "times = buf[1]" in before
-    assert fn.body[loop_at].iter.func.id == "prange" and ast.unparse(fn.body[loop_at].target) == "i"
-    assert "step_env(" not in src and "env_step(env_row(st, i)" in src
-    assert hoisted_source(functional.observe_rows, functional.observe_row).splitlines()[1] == "    trig = st[1]"
+    from penny_env.backends.builder import BuildError, hoisted_source, inline_source
+    inlined = hoisted_source(_loop, _loop_body, (_double_and_count, _note))
+    before, inside, calls, _ = _loop_extractions(inlined)
+    assert calls.isdisjoint({"_double_and_count", "_note"}) and inside == [] and len(before) == 2  # out[1], out[0]
+    scope = {"prange": range}
+    exec(compile(inlined, "<test>", "exec"), scope)  # noqa: S102
+    X = np.array([0.2, 0.7, -1.5, 3.0])
+    ref = ([np.zeros(4), np.zeros(4)], np.zeros(4))
+    got = ([np.zeros(4), np.zeros(4)], np.zeros(4))
+    for i in range(4):
+        _loop_body(i, X, *ref)
+    scope["_loop"](X, *got)
+    assert all(np.array_equal(a, b) for a, b in zip(ref[0] + [ref[1]], got[0] + [got[1]]))
+    with pytest.raises(BuildError, match="_two_returns cannot be pasted in: it must end in its one return"):
+        inline_source(ast.parse("y = _two_returns(v, out, i)").body, (_two_returns,), set())
+    with pytest.raises(BuildError, match="keyword"):
+        inline_source(ast.parse("y = _double_and_count(v, out, j=i)").body, (_double_and_count,), set())
+    with pytest.raises(BuildError, match=r"no call of \['_two_returns'\]"):
+        hoisted_source(_loop, _loop_body, (_two_returns,))
+
+
+def test_a_loop_that_does_not_fit_is_refused_loudly():
+    """A loop whose body cannot be placed in the CPU loop raises, naming the loop and the reason (a silent
+    fallback would run the slow path unnoticed)."""
+    from penny_env.backends.builder import BuildError, hoisted_loop, hoisted_source
 
     def body_returns(i, a):
         x = a[0]
@@ -319,15 +413,18 @@ def test_cpu_loop_takes_the_record_arrays_once_before_the_loop():
     def loop_renamed(a):
         for i in prange(a.shape[0]):  # noqa: F821
             body_renamed(i, a)
-    assert hoisted_source(loop_returns, body_returns) is None
-    assert hoisted_source(loop_renamed, body_renamed) is None
-    assert hoisted_loop(loop_returns, {"body_returns": body_returns}) is None
+    with pytest.raises(BuildError, match="loop_returns: the body body_returns has a return statement"):
+        hoisted_source(loop_returns, body_returns)
+    with pytest.raises(BuildError, match=r"loop_renamed: the body body_renamed must take \(index, a\)"):
+        hoisted_source(loop_renamed, body_renamed)
+    with pytest.raises(BuildError, match="not a plain function"):
+        hoisted_loop(loop_returns, {})
 
 
 @needs_numba
 @pytest.mark.parametrize("n", [3, 600])
 def test_hoisted_loop_steps_like_the_plain_step(n):
-    """The compiled vector step (hoisted loop; serial below parallel.SERIAL_BELOW, parallel above) equals
+    """The compiled vector step (hoisted loop; serial below threads.SERIAL_BELOW, parallel above) equals
     the plain-Python one bitwise, impacts included."""
     out = []
     for backend in ("python", "numba"):
@@ -343,63 +440,3 @@ def test_hoisted_loop_steps_like_the_plain_step(n):
     for a, b in zip(*out):
         for x, y in zip(a, b):
             assert np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)
-
-
-def _double_and_count(v, out, j):
-    """(test helper for the source inliner) one return, at the end."""
-    w = v * 2.0
-    if w > 1.0:
-        out[j] = w
-    else:
-        w = -w
-    return w, j + 1
-
-
-def _two_returns(v, out, j):
-    if v > 0:
-        return v
-    return -v
-
-
-def _loop_body(i, X, out, total):
-    v = X[i]
-    w, n = _double_and_count(v, out, i)
-    total[i] = w + n
-
-
-def _loop(X, out, total):
-    for i in prange(X.shape[0]):  # noqa: F821 (range in the scope the test runs it in)
-        _loop_body(i, X, out, total)
-
-
-def test_source_inliner_pastes_calls_with_the_callers_names():
-    """builder.inline_source: the vector step's CPU loop has env_step and run_interval pasted in, their
-    array arguments under the caller's own names (numba copies an inlined function's arguments, and each
-    array copy costs two atomic operations per penny where the function calls one that may raise); a small
-    loop so pasted computes what the original computes; functions that cannot be pasted leave the loop."""
-    import ast
-
-    from penny_env.physics.builder import hoisted_source, inline_source
-    src = hoisted_source(functional.step_envs, functional.step_env, (functional.env_step, scalar.run_interval))
-    calls = {n.func.id for n in ast.walk(ast.parse(src)) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
-    assert "env_step" not in calls and "run_interval" not in calls and "advance_into" in calls
-    assert "advance_into(_run_interval2_s, _env_step1_acc1, _env_step1_acc2, _run_interval2_dt, m, " \
-           "_run_interval2_stop_after, buf, i, 0.0," in src  # buf and i: the loop's own names
-    # a pasted loop computes what the original does, in plain Python
-    inlined = hoisted_source(_loop, _loop_body, (_double_and_count,))
-    assert "_double_and_count(" not in inlined and "out[i] = __double_and_count1_w" in inlined
-    scope = {"prange": range}
-    exec(compile(inlined, "<test>", "exec"), scope)  # noqa: S102
-    X = np.array([0.2, 0.7, -1.5, 3.0])
-    ref = (np.zeros(4), np.zeros(4))
-    got = (np.zeros(4), np.zeros(4))
-    for i in range(4):
-        _loop_body(i, X, *ref)
-    scope["_loop"](X, *got)
-    assert np.array_equal(ref[0], got[0]) and np.array_equal(ref[1], got[1])
-    # not pasted: two returns; a keyword argument; a callee's global shadowed by the caller's local
-    stmt = ast.parse("y = _two_returns(v, out, i)").body
-    assert inline_source(stmt, (_two_returns,), set()) is None
-    assert inline_source(ast.parse("y = _double_and_count(v, out, j=i)").body, (_double_and_count,), set()) is None
-    assert inline_source(ast.parse("y = _double_and_count(v, out, i)").body, (_double_and_count,), set()) is not None
-    assert hoisted_source(_loop, _loop_body, (_two_returns,)) is not None  # (no call of it: nothing to paste)

@@ -21,7 +21,7 @@ def copy_package(dest: Path) -> Path:
     pyproject.toml and README.md."""
     dest.mkdir(parents=True, exist_ok=True)
     for folder in ("penny_env", "training"):
-        shutil.copytree(ROOT / folder, dest / folder, ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc",
+        shutil.copytree(ROOT / folder, dest / folder, ignore=shutil.ignore_patterns("__pycache__", "_generated", "*.nbi", "*.nbc",
                                                                                    "*.stamp"))
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, dest / name)
@@ -56,9 +56,11 @@ def test_the_wheel_ships_penny_env_with_its_data_and_no_top_level_training(wheel
     tops = {n.split("/")[0] for n in names}
     assert tops == {"penny_env", next(t for t in tops if t.endswith(".dist-info"))}, tops  # no training, configs, tests
     # everything the package reads at run time: every module, preset and reference data file of the checkout
+    # (not the source the backends generate where they run: backends/_generated, git-ignored)
     needed = {p.relative_to(ROOT).as_posix() for p in (ROOT / "penny_env").rglob("*")
-              if p.suffix in (".py", ".yaml", ".json") and "__pycache__" not in p.parts}
+              if p.suffix in (".py", ".yaml", ".json") and "__pycache__" not in p.parts and "_generated" not in p.parts}
     assert needed and needed <= names, sorted(needed - names)
+    assert not [n for n in names if "_generated" in n]
 
 
 def unprivileged_prefix():
@@ -179,8 +181,8 @@ def test_an_edited_task_module_is_recompiled_with_numba_cache_dir_set(tmp_path):
 
     compiled, python = rewards()
     assert compiled == python
-    tasks = src / "penny_env" / "envs" / "tasks.py"
-    old = "        return progress - k.cc * ctrl + k.bonus * success, success\n"
+    tasks = src / "penny_env" / "envs" / "tasks" / "reach.py"
+    old = "    return progress(k, before, after) - k.ctrl_cost * ctrl + k.success_bonus * success, success\n"
     assert tasks.read_text().count(old) == 1
     tasks.write_text(tasks.read_text().replace(old, old.replace("success, success", "success + 1000.0, success")))
     compiled2, python2 = rewards()
@@ -193,15 +195,23 @@ def test_every_cached_compiled_function_is_named_after_the_sources_it_inlines():
     physics (batch API) and of the env step (single and vector env) carries the digest of all the
     modules it inlines in its name, after which numba names its cache files."""
     pytest.importorskip("numba")
-    from penny_env.envs import functional, tasks
-    from penny_env.physics import compiled
+    from penny_env.backends import batch_entry_points, cache
+    from penny_env.backends.env import env_entry_points, env_modules
+    from penny_env.backends.physics import physics_modules
+    from penny_env.envs.core import Core
+    from penny_env.envs.scene import resolve
     from penny_env.physics.tables import COMPILED_FORMULAS
 
-    physics = compiled.source_digest(compiled.physics_modules())
-    env = compiled.source_digest(compiled.physics_modules() + (tasks, functional))
-    assert physics != env
-    for kind in range(-1, len(COMPILED_FORMULAS)):
-        for digest, fns in ((physics, compiled.compiled_functions(kind)), (env, functional.compiled_env_functions(kind))):
-            for name, f in fns.items():
+    physics = cache.source_digest(physics_modules())
+    for task in ("reach", "park", "impacts"):
+        core = Core(*resolve("ellipse", task), backend="python")
+        env = cache.source_digest(env_modules(core.task_record))
+        assert physics != env
+        for kind in range(-1, len(COMPILED_FORMULAS)):
+            entry = env_entry_points("cpu", kind, core.task_record, type(core.k))
+            fns = [(physics, name, f) for name, f in batch_entry_points("cpu", kind).functions.items()]
+            fns += [(env, name, getattr(entry, name)) for name in ("env_step", "initial_state", "observe_state",
+                                                                     "step_envs", "reset_rows", "observe_rows")]
+            for digest, name, f in fns:
                 f = f if hasattr(f, "py_func") else f.__wrapped__  # the parallel calls' lock
                 assert f.py_func.__qualname__.endswith(f"_{digest}"), (kind, name, f.py_func.__qualname__)

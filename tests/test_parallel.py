@@ -27,7 +27,7 @@ FORK = """
     import numpy as np
     import gymnasium as gym
     import penny_env, penny_env.batch as pb
-    from penny_env.physics.parallel import SERIAL_BELOW
+    from penny_env.backends.threads import SERIAL_BELOW
     N = SERIAL_BELOW  # enough pennies for the parallel loops (fewer run on the calling thread)
 
     def use(seed):
@@ -42,7 +42,7 @@ FORK = """
 
     use(0)  # the parent has run the parallel loops (vector env and batch)
     import numba
-    from penny_env.physics import parallel
+    from penny_env.backends import threads as parallel
     print("parent layer", numba.threading_layer())
     r, w = os.pipe()
     pid = os.fork()
@@ -80,7 +80,7 @@ THREADS = """
     import numba
     import penny_env, penny_env.batch as pb
 
-    from penny_env.physics.parallel import SERIAL_BELOW
+    from penny_env.backends.threads import SERIAL_BELOW
     N = SERIAL_BELOW  # enough pennies for the parallel loops (fewer run on the calling thread)
     envs = [gym.make_vec("PennyReach-Plane-v0", num_envs=N) for _ in range(2)]
     errors = []
@@ -122,7 +122,7 @@ def test_two_python_threads_step_two_vector_envs_and_batches_at_once(layer):
 def test_the_users_threading_layer_choice_is_kept():
     code, out = run_script("""
         import numba, numpy as np, gymnasium as gym, penny_env
-        from penny_env.physics.parallel import SERIAL_BELOW  # (fewer pennies run on the calling thread)
+        from penny_env.backends.threads import SERIAL_BELOW  # (fewer pennies run on the calling thread)
         v = gym.make_vec("PennyReach-Plane-v0", num_envs=SERIAL_BELOW)
         v.reset(seed=0)
         v.step(np.zeros((SERIAL_BELOW, 2), dtype=np.float32))
@@ -140,7 +140,7 @@ def test_the_parallel_loops_equal_the_serial_ones_on_a_walled_table():
 
     from penny_env import PennyVectorEnv
     import penny_env.batch as pb
-    from penny_env.physics.parallel import SERIAL_BELOW
+    from penny_env.backends.threads import SERIAL_BELOW
     n = SERIAL_BELOW + 8
     big, small = PennyVectorEnv(n, "stadium", "impacts"), PennyVectorEnv(8, "stadium", "impacts")
     ob, _ = big.reset(seed=5)

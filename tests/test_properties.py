@@ -184,7 +184,7 @@ def test_protocol_object_as_table():
     np.testing.assert_allclose(mine.impact_times, ref.impact_times, rtol=1e-12)
     # the batch API and the environments take it too
     from penny_env import batch
-    from penny_env.physics import compiled
+    from penny_env.backends import choice as compiled
     compiled._WARNED.discard(type(pe.physics.tables.as_table(_CircleByProtocol())))
     with pytest.warns(RuntimeWarning, match="plain-Python event loop"):  # no compiled formulas: said once
         out = batch.simulate(np.array([s0]), table=_CircleByProtocol(), law="elastic", t_final=2.0)

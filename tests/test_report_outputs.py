@@ -59,7 +59,7 @@ def test_train_output_folder(reports_untouched, monkeypatch):
 
 
 def test_throughput_quick_refuses_to_write_the_readme(reports_untouched):
-    from penny_env.analysis import throughput
+    from devtools import throughput
     readme = reports_untouched / "README.md"
     readme.write_text("<!-- throughput:start -->\n<!-- throughput:end -->\n")
     with pytest.raises(SystemExit):

@@ -6,7 +6,7 @@ from hypothesis import given, strategies as st
 import penny_env as pe
 from penny_env.physics import advance_pennies, flow
 from penny_env.physics.laws import make_law
-from penny_env.physics.compiled import available
+from penny_env.backends.choice import available
 from penny_env.physics.params import SolverSettings
 from penny_env.physics.scalar import advance1, flow1
 from conftest import random_inside_state

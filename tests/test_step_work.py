@@ -1,13 +1,13 @@
 """The work-per-step diagnostics (issue 10.6) run in --quick mode and report every preset."""
 import pytest
 
-from penny_env.physics.compiled import available
+from penny_env.backends.choice import available
 
 pytestmark = pytest.mark.skipif(not available(), reason="numba is not installed")
 
 
 def test_step_work_quick_reports_every_preset(capsys):
-    from penny_env.analysis import step_work
+    from devtools import step_work
     step_work.counters(8, 2)
     step_work.penny_costs(16, 3)
     step_work.reset_costs(16, 3)

@@ -35,13 +35,13 @@ def test_drive_probe_targets_off_the_heading_line(table):
     env_id = f"PennyProbeDrive-{table}-v0"
     venv = PennyVectorEnv(1, **env_presets()[env_id])
     core = venv._core
-    S, target, _ = core.sample(seed_keys(np.arange(4096)), np.zeros(4096, dtype=np.uint64))
+    S, target, _ = core.draw_episodes(seed_keys(np.arange(4096)), 0)
     off = np.abs((target[0] - S[0]) * np.sin(S[3]) - (target[1] - S[1]) * np.cos(S[3]))
     assert off.min() >= 0.03
     assert np.all(S[4] == 0) and np.all(S[5] == 0)
     # the targets stay in the documented region (target_fraction of the spawn ellipse, shrunk)
     ax, ay = venv.scene.spawn_axes()
-    assert np.all((target[0] / ax) ** 2 + (target[1] / ay) ** 2 <= core.f_target ** 2 * (1 + 1e-12))
+    assert np.all((target[0] / ax) ** 2 + (target[1] / ay) ** 2 <= core.k.target_scale ** 2 * (1 + 1e-12))
     venv.close()
 
 

@@ -10,7 +10,7 @@ import penny_env as pe
 import penny_env.batch as pb
 from penny_env.envs import ConfigError
 from penny_env.physics import tables as T
-from penny_env.physics.compiled import available
+from penny_env.backends.choice import available
 from penny_env.physics.laws import COMPILED_LAWS, LAW_KINDS, make_law
 from penny_env.physics.tables import ProtocolTable, Table, check_on_grid, make_table
 
@@ -201,7 +201,7 @@ def test_a_registered_table_and_law_run_plain_and_compiled(registered):
 
 
 def test_unregistered_table_warns_once_and_runs_the_plain_loop():
-    from penny_env.physics import compiled
+    from penny_env.backends import choice as compiled
     compiled._WARNED.discard(pe.ConvexTable)
     s = 0.2
     table = pe.ConvexTable(lambda x, y: (x**4 + y**4 - s**4) / (4 * s**3), lambda x, y: (x**3 / s**3, y**3 / s**3),
@@ -229,7 +229,7 @@ def test_scenes_take_table_objects_and_the_rounded_rectangle_ids():
         for _ in range(20):
             e.step(e.action_space.sample())
     with pytest.warns(RuntimeWarning, match="plain-Python"):
-        from penny_env.physics import compiled
+        from penny_env.backends import choice as compiled
         compiled._WARNED.discard(ProtocolTable)
         env = pe.PennyEnv(scene="circle", table=_Circle())
     env.reset(seed=0)

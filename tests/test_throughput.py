@@ -1,5 +1,5 @@
 """The throughput benchmark command runs (--quick) and writes its Markdown report."""
-from penny_env.analysis import throughput
+from devtools import throughput
 
 
 def test_throughput_quick(reports_untouched):

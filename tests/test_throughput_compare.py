@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from penny_env.analysis import throughput_compare
+from devtools import throughput_compare
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -7,7 +7,7 @@ import pytest
 
 import penny_env as pe
 import penny_env.batch as pb
-from penny_env.physics.compiled import available as numba_available
+from penny_env.backends.choice import available as numba_available
 from penny_env.physics.flows import kinetic_energy
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MIN_GAP
@@ -103,8 +103,8 @@ def test_batch_and_env_paths_resume_after_the_cap(backend):
     advance = advance_through_into
     model = scalar_model(PARAMS, table, ELASTIC, settings)
     if backend == "numba":
-        from penny_env.physics.compiled import compiled_functions
-        advance = compiled_functions(model.kind)["advance_through_into"]
+        from penny_env.backends import batch_entry_points
+        advance = batch_entry_points("cpu", model.kind).functions["advance_through_into"]
     buf = impact_buffers(1, 64)
     s, elapsed = advance(tuple(s0), 0.0, 0.0, 5.0, model, 0, buf, 0, NO_ARC)
     impacts, rests = impacts_of(buf, 0)

@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from penny_env.envs.tasks.park import rest_speed
 from training.study_report import clopper_pearson
 from training.witness import FAMILIES, V_SWITCH, Witness, positive_int, run_episode
 from training.witness_study import LAWS, PROBE_TASKS, TABLE_NAMES, cell_spec
@@ -87,7 +88,7 @@ class Expert:
         self.w = Witness(self.env_id, self.overrides)
         self.core, self.family, self.cands = self.w.core, self.w.family, self.w.cands
         self.max_steps = self.w.max_steps
-        self.v_switch = V_SWITCH * self.core.task.speed_tolerance
+        self.v_switch = V_SWITCH * rest_speed(self.core.task)
         self.order = np.arange(len(self.cands))  # candidate indices, preferred first
 
     def close(self):

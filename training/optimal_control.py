@@ -55,6 +55,8 @@ from pathlib import Path
 
 import numpy as np
 
+from penny_env.envs.tasks.park import rest_speed
+
 import penny_env as pe
 from training.shooting import SEGMENT_ROWS, MultipleShooting, segment_bounds, wall_values
 
@@ -100,7 +102,7 @@ class Problem:
             self.limits[1] = 0.0
         elif self.actuation == "drive":
             self.limits[0] = 0.0
-        self.tolerance, self.speed_tolerance = float(tk.tolerance), float(tk.speed_tolerance)
+        self.tolerance, self.speed_tolerance = float(tk.tolerance), rest_speed(tk)
         self.start = np.array(self.start, dtype=float)
         if self.start.shape != (6,) or not np.all(np.isfinite(self.start)):
             raise ValueError(f"start must be 6 finite numbers, got {self.start!r}")

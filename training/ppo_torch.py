@@ -1,7 +1,8 @@
 """A compact PPO in torch (CleanRL's ppo_continuous_action, one file) over penny_env's native vector env.
 
     python -m training.ppo_torch [--env-id PennyReach-Ellipse-v0] [--num-envs 32] [--total-timesteps 1000000]
-                                 [--seed 0] [--device auto|cpu|cuda] [--quick] [--out DIR]
+                                 [--seed 0] [--device auto|cpu|cuda] [--env-backend cuda] [--set FIELD=VALUE ...]
+                                 [--quick] [--out DIR]
 
 The environment and the policy stay on one device: the vector env is
 ``gymnasium.make_vec(env_id, num_envs, vectorization_mode="vector_entry_point")`` (PennyVectorEnv), whose
@@ -14,6 +15,16 @@ The hyperparameters default to those of configs/train/ppo_reach_ellipse.yaml and
 1024, Adam 3e-4 (eps 1e-5), gamma 0.99, GAE lambda 0.95, clip 0.2, no value clipping, entropy 0, value
 coefficient 0.5, gradient norm 0.5, advantages normalised per minibatch, separate 64-64 tanh MLPs for the
 actor mean and the critic with orthogonal initialisation, and a state-independent log-std starting at 0.
+
+Env fields: a config's ``env_kwargs`` and ``--set FIELD=VALUE`` (YAML values, e.g. ``--set law=plastic
+"table={kind: circle, radius: 0.12}" progress_weight=0``) override any scene or task field of the id, as
+``gymnasium.make(id, **kwargs)`` does; the evaluation uses the same fields.
+
+On CUDA with the env's state on the device (``--env-backend cuda``, torch outputs), a whole rollout (the
+policy's forward pass, the sampling, the env's step and the rollout buffer's writes, ``num_steps`` times) is
+captured once in a CUDA graph and replayed at every iteration (``--cuda-graph``, on by default there): the
+host launches one graph per rollout instead of a few hundred kernels. The env's outputs stay valid until the
+step after the next (penny_env's device step uses two output sets in turn), which is all a rollout needs.
 
 Autoreset: the vector env runs in NEXT_STEP mode. The step that ends an episode returns the episode's last
 observation (the true next state: bootstrapping a truncated episode uses its value) and the *next* step
@@ -59,6 +70,9 @@ class Args:
     seed: int = 0
     device: str = "auto"  # auto: cuda if torch.cuda.is_available(), else cpu
     env_backend: str | None = None  # passed to the vector env as backend= when given (e.g. "cuda")
+    env_kwargs: dict = dataclasses.field(default_factory=dict)  # scene/task field overrides of the id
+    cuda_graph: bool | None = None  # capture each rollout in a CUDA graph (None: where the env is on the device)
+    curve_points: int = 0  # deterministic evaluations during training, at log-spaced steps (results["curve"])
     num_steps: int = 128  # steps per env per rollout (SB3's n_steps)
     minibatch_size: int = 1024  # SB3's batch_size
     update_epochs: int = 10
@@ -99,7 +113,7 @@ def args_from_config(cfg: dict, **changes) -> Args:
     arch = cfg.get("policy_kwargs", {}).get("net_arch")
     if arch is not None:
         fields["hidden"] = tuple(arch)
-    for key in ("env_id", "num_envs", "total_timesteps", "seed", "eval_episodes"):
+    for key in ("env_id", "num_envs", "total_timesteps", "seed", "eval_episodes", "env_kwargs"):
         if key in cfg:
             fields[key] = cfg[key]
     return dataclasses.replace(Args(), **{**fields, **changes})
@@ -134,6 +148,17 @@ def check_args(args: Args) -> None:
     from penny_env.envs.registration import env_ids
     if args.env_id not in gym.registry or args.env_id not in env_ids():
         raise ValueError(f"env_id {args.env_id!r} is not a registered penny_env id; known: {env_ids()}")
+    if not isinstance(args.env_kwargs, dict):
+        raise ValueError(f"env_kwargs must be a mapping of scene/task fields, got {args.env_kwargs!r}")
+    if args.env_kwargs:  # the fields, checked by the env's own resolver (an unknown or bad field is named)
+        from penny_env.envs.scene import env_presets, resolve
+        spec = dict(env_presets()[args.env_id])
+        try:
+            resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **args.env_kwargs})
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"env_kwargs: {exc}") from None
+    if isinstance(args.curve_points, bool) or not isinstance(args.curve_points, int) or args.curve_points < 0:
+        raise ValueError(f"curve_points must be a non-negative integer, got {args.curve_points!r}")
 
 
 def resolve_device(name: str) -> torch.device:
@@ -164,9 +189,20 @@ def env_actions(actions: torch.Tensor, on_torch: bool):
 def make_env(args: Args, num_envs: int | None = None):
     import gymnasium as gym
     import penny_env  # noqa: F401
-    kwargs = {} if args.env_backend is None else {"backend": args.env_backend}
+    kwargs = dict(args.env_kwargs)
+    if args.env_backend is not None:
+        kwargs["backend"] = args.env_backend
     return gym.make_vec(args.env_id, num_envs=num_envs or args.num_envs, vectorization_mode="vector_entry_point",
                         **kwargs)
+
+
+def curve_steps(total: int, points: int, first: int) -> list:
+    """``points`` evaluation thresholds, log-spaced from ``first`` (one rollout) to ``total`` env steps."""
+    if points <= 0:
+        return []
+    if points == 1:
+        return [total]
+    return sorted({int(round(v)) for v in np.geomspace(first, total, points)})
 
 
 # -- the agent ---------------------------------------------------------------------------------
@@ -256,7 +292,7 @@ def ppo_update(agent, optimizer, b_obs, b_actions, b_logprobs, b_advantages, b_r
 
 # -- training --------------------------------------------------------------------------------------
 CSV_COLUMNS = ["global_step", "wall_time_s", "success_rate", "mean_return", "episodes", "policy_loss", "value_loss",
-               "entropy", "approx_kl", "clipfrac", "steps_per_s", "env_time_s", "update_time_s"]
+               "entropy", "approx_kl", "clipfrac", "steps_per_s", "env_time_s", "update_time_s", "rollout_time_s"]
 
 
 def default_out(args: Args) -> Path:
@@ -304,38 +340,69 @@ def train(args: Args, env=None, log=print, on_update=None):
     episodes = 0
 
     t0 = time.perf_counter()
-    next_obs, _ = env.reset(seed=args.seed)
-    next_obs = to_tensor(next_obs, device)
+    first_obs, _ = env.reset(seed=args.seed)
+    cur_obs = to_tensor(first_obs, device).clone()  # the observation the next step acts on (updated in place)
     autoreset = torch.zeros(N, device=device)  # 1 where the env resets at the next step (NEXT_STEP mode)
     ep_ret = torch.zeros(N, device=device)
+    timing = {"env": 0.0}  # host seconds in env.step (eager rollouts only: a graph's are not separable)
+
+    def rollout():
+        """num_steps steps of every env into the rollout buffers, in place (so that a CUDA graph can hold it)."""
+        for step in range(T):
+            obs[step].copy_(cur_obs)
+            valid[step].copy_(1.0 - autoreset)
+            with torch.no_grad():
+                action, logprob, _, value = agent.get_action_and_value(cur_obs)
+            actions[step].copy_(action)
+            logprobs[step].copy_(logprob)
+            values[step].copy_(value)
+            t_env = time.perf_counter()
+            next_obs, reward, term, trunc, info = env.step(env_actions(action, on_torch))
+            timing["env"] += time.perf_counter() - t_env
+            reward, term = to_tensor(reward, device), to_tensor(term, device)
+            done = torch.maximum(term, to_tensor(trunc, device))
+            rewards[step].copy_(reward)
+            terminations[step].copy_(term)
+            dones[step].copy_(done)
+            # episode statistics of the valid steps (a reset step has reward 0 and is never done)
+            ep_ret.add_(reward)
+            ep_ends[step].copy_(done * valid[step])
+            ep_success[step].copy_(to_tensor(info["is_success"], device) * done)
+            ep_return_at_end[step].copy_(ep_ret)
+            ep_ret.mul_(1.0 - done)
+            autoreset.copy_(done)
+            cur_obs.copy_(to_tensor(next_obs, device))
+
+    use_graph = args.cuda_graph if args.cuda_graph is not None else (device.type == "cuda" and on_torch)
+    if use_graph and not (device.type == "cuda" and on_torch):
+        raise ValueError("cuda_graph needs device cuda and an env whose outputs are torch tensors on it "
+                         "(--env-backend cuda)")
+    graph = None
     global_step, iterations = 0, max(1, -(-args.total_timesteps // (N * T)))
-    env_time = update_time = 0.0  # host seconds in env.step and in the updates (GAE included)
+    eval_at = curve_steps(iterations * N * T, args.curve_points, N * T)
+    curve = []
+    update_time = rollout_time = 0.0  # host seconds in the updates (GAE included) and in the rollouts
     f = open(out / "progress.csv", "w", newline="")
     rows = csv.writer(f)
     rows.writerow(CSV_COLUMNS)
     row = None
     for iteration in range(1, iterations + 1):
-        for step in range(T):
-            global_step += N
-            obs[step] = next_obs
-            valid[step] = 1.0 - autoreset
-            with torch.no_grad():
-                action, logprob, _, value = agent.get_action_and_value(next_obs)
-            actions[step], logprobs[step], values[step] = action, logprob, value
-            t_env = time.perf_counter()
-            next_obs, reward, term, trunc, info = env.step(env_actions(action, on_torch))
-            env_time += time.perf_counter() - t_env
-            next_obs = to_tensor(next_obs, device)
-            reward, term = to_tensor(reward, device), to_tensor(term, device)
-            done = torch.maximum(term, to_tensor(trunc, device))
-            rewards[step], terminations[step], dones[step] = reward, term, done
-            # episode statistics of the valid steps (a reset step has reward 0 and is never done)
-            ep_ret += reward
-            ep_ends[step] = done * valid[step]
-            ep_success[step] = to_tensor(info["is_success"], device) * done
-            ep_return_at_end[step] = ep_ret
-            ep_ret = ep_ret * (1.0 - done)
-            autoreset = done
+        t_roll = time.perf_counter()
+        if not use_graph:
+            rollout()
+        elif graph is None:  # the first rollout runs eagerly on a side stream (warm-up), then one is captured
+            side = torch.cuda.Stream(device=device)
+            side.wait_stream(torch.cuda.current_stream(device))
+            with torch.cuda.stream(side):
+                rollout()
+            torch.cuda.current_stream(device).wait_stream(side)
+            graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(graph):
+                rollout()  # (recorded, not run: the next iterations replay it)
+        else:
+            graph.replay()
+        global_step += N * T
+        rollout_time += time.perf_counter() - t_roll
 
         # one host sync per rollout for the episode statistics
         ended = ep_ends.bool().cpu().numpy()
@@ -346,7 +413,7 @@ def train(args: Args, env=None, log=print, on_update=None):
 
         t_update = time.perf_counter()
         with torch.no_grad():
-            next_value = agent.get_value(next_obs)
+            next_value = agent.get_value(cur_obs)
             advantages, returns_ = compute_gae(rewards, values, terminations, dones, valid, next_value,
                                                args.gamma, args.gae_lambda)
         keep = valid.reshape(-1).bool()  # the reset steps of NEXT_STEP autoreset are no transitions
@@ -360,12 +427,21 @@ def train(args: Args, env=None, log=print, on_update=None):
         row = {"global_step": global_step, "wall_time_s": wall,
                "success_rate": float(np.mean(successes)) if successes else float("nan"),
                "mean_return": float(np.mean(returns)) if returns else float("nan"), "episodes": episodes,
-               **stats, "steps_per_s": global_step / wall, "env_time_s": env_time, "update_time_s": update_time}
+               **stats, "steps_per_s": global_step / wall,
+               "env_time_s": float("nan") if use_graph else timing["env"], "update_time_s": update_time,
+               "rollout_time_s": rollout_time}
         rows.writerow([row[c] for c in CSV_COLUMNS])
         f.flush()
         for key, value in row.items():
             if key not in ("global_step", "wall_time_s"):
                 writer.add_scalar(("losses/" if key in stats else "charts/") + key, value, global_step)
+        if eval_at and global_step >= eval_at[0]:
+            while eval_at and global_step >= eval_at[0]:
+                eval_at.pop(0)
+            t_eval = time.perf_counter()
+            ev = evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device)
+            curve.append({"global_step": global_step, "wall_time_s": wall, **ev})
+            t0 += time.perf_counter() - t_eval  # (evaluations are not training time)
         if on_update is not None:
             on_update(row)
         if log is not None and (iteration % 10 == 0 or iteration == iterations):
@@ -378,9 +454,10 @@ def train(args: Args, env=None, log=print, on_update=None):
     torch.save(agent.state_dict(), out / "model.pt")
     writer.close()
 
-    results = {"env_id": args.env_id, "timesteps": global_step, "train_seconds": train_seconds,
-               "steps_per_s": global_step / train_seconds, "device": str(device),
-               "env_seconds": env_time, "update_seconds": update_time,
+    results = {"env_id": args.env_id, "env_kwargs": args.env_kwargs, "timesteps": global_step,
+               "train_seconds": train_seconds, "steps_per_s": global_step / train_seconds, "device": str(device),
+               "cuda_graph": bool(use_graph), "env_seconds": float("nan") if use_graph else timing["env"],
+               "rollout_seconds": rollout_time, "update_seconds": update_time, "curve": curve,
                "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
     # a stand-in env passed by a caller (tests) has no registered id to evaluate on
     results["eval"] = evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device) if made_env else None
@@ -446,6 +523,11 @@ def parse_args(argv=None) -> Args:
     ap.add_argument("--seed", type=int, default=None, help="seed of the envs (env i: seed + i) and of torch (default 0)")
     ap.add_argument("--device", default="auto", help="auto (cuda if torch.cuda.is_available()), cpu or cuda")
     ap.add_argument("--env-backend", default=None, help="the vector env's backend= (default: the env's own)")
+    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                    help="scene/task field overrides of the env id (YAML values), as gymnasium.make(id, **kwargs)")
+    ap.add_argument("--cuda-graph", default=None, choices=["on", "off"],
+                    help="capture each rollout in a CUDA graph (default: on where the env's state is on the GPU)")
+    ap.add_argument("--curve-points", type=int, default=None, help="deterministic evaluations during training")
     ap.add_argument("--num-steps", type=int, default=None, help=f"steps per env per rollout (default {d.num_steps})")
     ap.add_argument("--eval-episodes", type=int, default=None, help=f"final evaluation (default {d.eval_episodes})")
     ap.add_argument("--torch-threads", type=int, default=1, help="torch.set_num_threads (default 1)")
@@ -460,13 +542,28 @@ def parse_args(argv=None) -> Args:
         else:
             args = Args()
         changes = {"env_id": a.env_id, "num_envs": a.num_envs, "total_timesteps": a.total_timesteps, "seed": a.seed,
-                   "num_steps": a.num_steps, "eval_episodes": a.eval_episodes}
+                   "num_steps": a.num_steps, "eval_episodes": a.eval_episodes, "curve_points": a.curve_points,
+                   "cuda_graph": None if a.cuda_graph is None else a.cuda_graph == "on"}
+        if a.set:
+            changes["env_kwargs"] = {**args.env_kwargs, **parse_sets(a.set)}
         args = dataclasses.replace(args, device=a.device, env_backend=a.env_backend, torch_threads=a.torch_threads,
                                    quick=a.quick, out=a.out, **{k: v for k, v in changes.items() if v is not None})
         check_args(quick_args(args) if args.quick else args)
     except ValueError as exc:
         ap.error(str(exc))
     return args
+
+
+def parse_sets(items) -> dict:
+    """{field: value} from FIELD=VALUE strings, values read as YAML ("0.5" a float, "{kind: circle}" a dict)."""
+    import yaml
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        out[key.strip()] = yaml.safe_load(value)
+    return out
 
 
 def main(argv=None):

@@ -40,6 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from penny_env.envs.tasks.park import rest_speed
+
 PROBE_PREFIX = "PennyProbe"
 PROBES = ("Steer", "Drive", "Both")
 V_SWITCH = 0.95  # steer: track the target after an impact that left |R theta_dot| under this x speed_tolerance
@@ -60,7 +62,7 @@ class SteerPark:
 
     def __init__(self, core, params):
         self.R, self.gain1 = core.R, core.gain1
-        self.v_switch = V_SWITCH * core.task.speed_tolerance
+        self.v_switch = V_SWITCH * rest_speed(core.task)
         self.psi1, self.delta2 = np.asarray(params, float).T
         n = len(self.psi1)
         self.mode = np.zeros(n, np.int64)  # 0: to psi1; 1: to the heading at the last impact + delta2; 2: track

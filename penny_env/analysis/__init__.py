@@ -10,7 +10,7 @@ Modules (each report is a command, ``python -m penny_env.analysis.<name> --help`
 * :mod:`penny_env.analysis.bench_solvers`  - speed and accuracy against solve_ivp (DOP853) on the paper's scenes;
 * :mod:`penny_env.analysis.work_precision` - work-precision diagram over several methods and scenes;
 * :mod:`penny_env.analysis.stability`  - stress cases with pass/fail;
-* :mod:`penny_env.analysis.throughput` - environment steps per second next to Gymnasium's own environments;
+* :mod:`devtools.throughput` - environment steps per second next to Gymnasium's own environments;
 * :mod:`penny_env.analysis.paper_figures` - the paper's figures;
 * :mod:`penny_env.analysis.dynamics`   - reachable sets and Lyapunov exponents of batches of pennies;
 * :mod:`penny_env.analysis.controllability` - does controllability of the penny need impacts? (sampled reachable sets).

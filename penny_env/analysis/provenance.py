@@ -31,10 +31,16 @@ _PHYSICS = ("penny_env/physics/scalar.py", "penny_env/physics/flows.py", "penny_
             "penny_env/physics/laws.py", "penny_env/physics/params.py", "penny_env/physics/simulation.py")
 _TABLES = ("penny_env/physics/tables/base.py", "penny_env/physics/tables/ellipse.py",
            "penny_env/physics/tables/stadium.py", "penny_env/physics/tables/rounded_rectangle.py")
-_ENV = ("penny_env/physics/builder.py", "penny_env/envs/functional.py", "penny_env/envs/core.py", "penny_env/envs/tasks.py",
-        "penny_env/envs/scene.py", "penny_env/presets/envs.yaml", "penny_env/presets/scenes/ellipse.yaml",
-        "penny_env/presets/scenes/circle.yaml", "penny_env/presets/scenes/stadium.yaml",
-        "penny_env/presets/scenes/plane.yaml", "penny_env/presets/scenes/rounded_rectangle.yaml")
+# the compile machinery of the compiled physics and batch loops (backends/)
+_BATCH = ("penny_env/physics/batch_loops.py", "penny_env/physics/pennies.py", "penny_env/backends/builder.py",
+          "penny_env/backends/physics.py", "penny_env/backends/batch.py")
+_ENV = ("penny_env/backends/builder.py", "penny_env/backends/env.py", "penny_env/backends/packing.py",
+        "penny_env/envs/functional.py", "penny_env/envs/draws.py", "penny_env/envs/core.py",
+        "penny_env/envs/tasks/base.py", "penny_env/envs/tasks/reach.py", "penny_env/envs/tasks/park.py",
+        "penny_env/envs/tasks/impacts.py", "penny_env/envs/scene.py", "penny_env/presets/envs.yaml",
+        "penny_env/presets/scenes/ellipse.yaml", "penny_env/presets/scenes/circle.yaml",
+        "penny_env/presets/scenes/stadium.yaml", "penny_env/presets/scenes/plane.yaml",
+        "penny_env/presets/scenes/rounded_rectangle.yaml")
 
 # report -> (the command that regenerates it, run from the repository root; its sources)
 REPORTS = {
@@ -45,21 +51,21 @@ REPORTS = {
                                ("penny_env/analysis/work_precision.py", "penny_env/analysis/integrators.py",
                                 "penny_env/analysis/reference.py") + _PHYSICS + _TABLES),
     "docs/stability.md": ("python -m penny_env.analysis.stability --out docs/stability.md",
-                          ("penny_env/analysis/stability.py", "penny_env/physics/pennies.py",
-                           "penny_env/physics/validation.py") + _PHYSICS + _TABLES),
-    "docs/throughput.md": ("python -m penny_env.analysis.throughput --out docs/throughput.md --readme README.md",
-                           ("penny_env/analysis/throughput.py", "penny_env/envs/penny_env.py",
-                            "penny_env/envs/vector_env.py", "penny_env/physics/parallel.py",
-                            "penny_env/physics/compiled.py") + _ENV + _PHYSICS + _TABLES),
+                          ("penny_env/analysis/stability.py", "penny_env/physics/validation.py") + _BATCH + _PHYSICS
+                          + _TABLES),
+    "docs/throughput.md": ("python -m devtools.throughput --out docs/throughput.md --readme README.md",
+                           ("devtools/throughput.py", "penny_env/envs/penny_env.py",
+                            "penny_env/envs/vector_env.py", "penny_env/backends/threads.py") + _ENV + _PHYSICS
+                           + _TABLES),
     "docs/baselines.md": ("python -m training.baselines --out docs/baselines.md",
                           ("training/baselines.py",) + _ENV + _PHYSICS + _TABLES),
     "docs/paper_figures.md": ("python -m penny_env.analysis.paper_figures --out docs/paper_figures.md",
-                              ("penny_env/analysis/paper_figures.py", "penny_env/batch.py", "penny_env/physics/compiled.py", "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
+                              ("penny_env/analysis/paper_figures.py", "penny_env/batch.py") + _BATCH + _PHYSICS + _TABLES),
     "docs/dynamics.md": ("python -m penny_env.analysis.dynamics --out docs/dynamics.md",
-                         ("penny_env/analysis/dynamics.py", "penny_env/batch.py", "penny_env/physics/compiled.py", "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
+                         ("penny_env/analysis/dynamics.py", "penny_env/batch.py") + _BATCH + _PHYSICS + _TABLES),
     "docs/controllability.md": ("python -m penny_env.analysis.controllability --out docs/controllability.md",
                                 ("penny_env/analysis/controllability.py", "penny_env/analysis/dynamics.py",
-                                 "penny_env/batch.py", "penny_env/physics/compiled.py", "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
+                                 "penny_env/batch.py") + _BATCH + _PHYSICS + _TABLES),
     "docs/study.md": ("python -m training.study --config configs/study/large.yaml",
                       ("training/study.py", "training/study_report.py", "configs/study/large.yaml") + _ENV + _PHYSICS
                       + _TABLES),
@@ -74,8 +80,7 @@ REPORTS = {
                                         + _PHYSICS + _TABLES),
     "docs/billiards.md": ("python -m penny_env.analysis.billiards --out docs/billiards.md",
                           ("penny_env/analysis/billiards.py", "penny_env/analysis/boundary_map.py", "penny_env/batch.py",
-                           "penny_env/physics/sensitivity.py", "penny_env/physics/compiled.py",
-                           "penny_env/physics/builder.py") + _PHYSICS + _TABLES),
+                           "penny_env/physics/sensitivity.py") + _BATCH + _PHYSICS + _TABLES),
     "docs/witnesses.md": ("python -m training.witness_study --workers 2",
                           ("training/witness.py", "training/witness_study.py", "training/verdict.py",
                            "training/policies.py", "penny_env/analysis/controllability_theorems.py",
@@ -92,29 +97,29 @@ REPORTS = {
                              ("training/fair_pure_rl.py", "training/fair_rl.py", "training/witness.py",
                               "training/witness_study.py", "training/study_report.py", "training/episodes.py",
                               "penny_env/sb3.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
-    "docs/contention.md": ("python -m penny_env.analysis.contention --out docs/contention.md",
-                           ("penny_env/analysis/contention.py", "penny_env/physics/parallel.py",
-                            "penny_env/physics/compiled.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
-    "docs/compile_time.md": ("python -m penny_env.analysis.compile_time --out docs/compile_time.md",
-                             ("penny_env/analysis/compile_time.py", "penny_env/physics/compiled.py",
-                              "penny_env/physics/parallel.py") + _ENV + _PHYSICS + _TABLES),
+    "docs/contention.md": ("python -m devtools.contention --out docs/contention.md",
+                           ("devtools/contention.py", "penny_env/backends/threads.py",
+                            "penny_env/envs/vector_env.py") + _BATCH + _ENV + _PHYSICS + _TABLES),
+    "docs/compile_time.md": ("python -m devtools.compile_time --out docs/compile_time.md",
+                             ("devtools/compile_time.py", "penny_env/backends/threads.py",
+                              "penny_env/backends/cache.py") + _BATCH + _ENV + _PHYSICS + _TABLES),
     "docs/ppo_torch.md": ("python -m training.ppo_compare --out docs/ppo_torch.md",
                           ("training/ppo_compare.py", "training/ppo_torch.py", "training/runner.py",
                            "training/episodes.py", "configs/train/ppo_reach_ellipse.yaml", "penny_env/sb3.py",
                            "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
-    "docs/throughput_compare.md": ("python -m penny_env.analysis.throughput_compare --before OLD --after NEW "
-                                   "--out docs/throughput_compare.md", ("penny_env/analysis/throughput_compare.py",)),
-    "docs/throughput_compare_busy.md": ("python -m penny_env.analysis.throughput_compare --busy --before OLD --after NEW "
+    "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
+                                   "--out docs/throughput_compare.md", ("devtools/throughput_compare.py",)),
+    "docs/throughput_compare_busy.md": ("python -m devtools.throughput_compare --busy --before OLD --after NEW "
                                         "--out docs/throughput_compare_busy.md",
-                                        ("penny_env/analysis/throughput_compare.py",)),
+                                        ("devtools/throughput_compare.py",)),
 }
 # the command modules whose header writes the line (common.header's module argument -> report)
 MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "penny_env.analysis.work_precision": "docs/work_precision.md",
                   "penny_env.analysis.stability": "docs/stability.md",
-                  "penny_env.analysis.throughput": "docs/throughput.md",
+                  "devtools.throughput": "docs/throughput.md",
                   "training.baselines": "docs/baselines.md",
                   "penny_env.analysis.paper_figures": "docs/paper_figures.md",
                   "penny_env.analysis.dynamics": "docs/dynamics.md",
@@ -122,13 +127,13 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "training.study": "docs/study.md",
                   "training.optimal_control": "docs/optimal_control_central.md",
                   "training.impact_oc": "docs/optimal_control.md",
-                  "penny_env.analysis.throughput_compare": "docs/throughput_compare.md",
+                  "devtools.throughput_compare": "docs/throughput_compare.md",
                   "penny_env.analysis.billiards": "docs/billiards.md",
                   "training.witness_study": "docs/witnesses.md",
                   "training.fair_rl": "docs/fair_rl.md",
                   "training.fair_pure_rl": "docs/fair_pure_rl.md",
-                  "penny_env.analysis.contention": "docs/contention.md",
-                  "penny_env.analysis.compile_time": "docs/compile_time.md",
+                  "devtools.contention": "docs/contention.md",
+                  "devtools.compile_time": "docs/compile_time.md",
                   "training.ppo_compare": "docs/ppo_torch.md"}
 
 PREFIX = "- sources: sha256 "

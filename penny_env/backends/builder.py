@@ -151,7 +151,8 @@ class Builder:
         under ``name``. Its globals are its own module's, with three changes: penny_env's functions that this
         build copied (the physics, the draws) are the build's copies; the module's other plain functions are
         copied alike (so its helpers compile with it); the math namespaces are the target's. A function
-        imported from another module of the same top-level package gets that module's namespace."""
+        imported from another module of the same top-level package, or of penny_env (a built-in task's
+        helper), gets that module's namespace."""
         out = self._module_namespace(f.__module__)[f.__name__]
         self.namespace[name] = out
         return out
@@ -172,7 +173,8 @@ class Builder:
                 ns[k] = self.namespace[v.__name__]
             elif isinstance(v, types.FunctionType) and v.__module__ == module_name:
                 ns[k] = jit_copy(v, ns, self._jit, self.variant, math=self.math)
-            elif isinstance(v, types.FunctionType) and v.__module__.split(".")[0] == package and v.__module__ in sys.modules:
+            elif (isinstance(v, types.FunctionType) and v.__module__ in sys.modules
+                  and v.__module__.split(".")[0] in (package, "penny_env")):
                 ns[k] = self._module_namespace(v.__module__)[v.__name__]
             else:
                 ns[k] = v
@@ -222,7 +224,9 @@ class Builder:
                   f"def {name}({args}):\n    i = cuda.grid(1)\n    if i < {count}:\n        {body}(i, {args})\n\n\n"
                   f"def {loop.__name__}_count({args}):\n    return {count}\n")
         scope = generated.define(name, source, dict(self.namespace), loop.__module__)
-        options = {} if max_registers is None else {"max_registers": int(max_registers)}
+        import numba
+        # (numba's CUDA simulator runs the kernels as Python: it has no registers to cap)
+        options = {} if max_registers is None or numba.config.ENABLE_CUDASIM else {"max_registers": int(max_registers)}
         return CudaLoop(cuda.jit(**options)(scope[name]), scope[f"{loop.__name__}_count"], loop.__name__, source)
 
 

@@ -101,7 +101,7 @@ class DeviceStep:
         if self.outputs == "torch":
             name = "bool" if np.dtype(dtype) == np.bool_ else np.dtype(dtype).name
             t = self.torch.zeros(shape, dtype=getattr(self.torch, name), device=f"cuda:{self.device}")
-            return self.cuda.as_cuda_array(t)
+            return self.cuda.as_cuda_array(t, sync=False)
         return self._alloc(shape, dtype)
 
     def _upload(self, host, output=False):
@@ -156,24 +156,41 @@ class DeviceStep:
         kernel (functional.LIMIT_ACTION)."""
         from ..envs.core import check_actions
         shape = (self.n, self.n_act)
+        torch = self.torch
+        if torch is not None and isinstance(actions, torch.Tensor) and actions.is_cuda:
+            # a torch tensor: checked from its metadata (no numba view: numba would synchronize on its stream)
+            if not actions.dtype.is_floating_point:
+                raise TypeError(f"actions must be a floating-point array, got dtype {actions.dtype}")
+            if tuple(actions.shape) != shape and not (self.n_act == 1 and tuple(actions.shape) == (self.n,)):
+                raise ValueError(f"actions must have shape {shape}, got shape {tuple(actions.shape)}")
+            if self.outputs == "numpy":  # (numpy outputs synchronize anyway: refuse as the CPU does)
+                finite = torch.isfinite(actions.reshape(self.n, -1)).all(dim=1)
+                if not bool(finite.all()):
+                    bad = torch.nonzero(~finite).flatten().cpu().numpy()
+                    raise ValueError(f"actions: non-finite action in sub-env(s) {bad[:10].tolist()}"
+                                     f"{' ...' if bad.size > 10 else ''}")
+            self._actions_t().copy_(actions.reshape(shape))
+            return
+        if hasattr(actions, "copy_to_host") and hasattr(actions, "dtype") and not isinstance(actions, np.ndarray):
+            # a numba device array (numba-cuda's, or its simulator's): copied on the device
+            if actions.dtype.kind != "f":
+                raise TypeError(f"actions must be a floating-point array, got dtype {actions.dtype}")
+            if actions.shape != shape and not (self.n_act == 1 and actions.shape == (self.n,)):
+                raise ValueError(f"actions must have shape {shape}, got shape {actions.shape}")
+            if actions.dtype != np.float64:
+                raise TypeError("actions as a numba device array must be float64 (or pass a torch tensor)")
+            self.actions.copy_to_device(actions.reshape(shape), stream=self.stream())
+            return
         if hasattr(actions, "__cuda_array_interface__") and not isinstance(actions, np.ndarray):
-            a = self.cuda.as_cuda_array(actions)
+            a = self.cuda.as_cuda_array(actions, sync=False)
             if a.dtype.kind != "f":
                 raise TypeError(f"actions must be a floating-point array, got dtype {a.dtype}")
-            if a.shape != shape:
-                if not (self.n_act == 1 and a.shape == (self.n,)):
-                    raise ValueError(f"actions must have shape {shape}, got shape {a.shape}")
-            if self.torch is not None:
-                t = self.torch.as_tensor(actions, device=f"cuda:{self.device}")
-                if self.outputs == "numpy":  # (numpy outputs synchronize anyway: refuse as the CPU does)
-                    finite = self.torch.isfinite(t.reshape(self.n, -1)).all(dim=1)
-                    if not bool(finite.all()):
-                        bad = self.torch.nonzero(~finite).flatten().cpu().numpy()
-                        raise ValueError(f"actions: non-finite action in sub-env(s) {bad[:10].tolist()}"
-                                         f"{' ...' if bad.size > 10 else ''}")
-                self._actions_t().copy_(t.reshape(shape))
-            elif a.dtype == np.float64 and a.is_c_contiguous():
+            if a.shape != shape and not (self.n_act == 1 and a.shape == (self.n,)):
+                raise ValueError(f"actions must have shape {shape}, got shape {a.shape}")
+            if a.dtype == np.float64 and a.is_c_contiguous():
                 self.actions.copy_to_device(a.reshape(shape), stream=self.stream())
+            elif torch is not None:
+                self._actions_t().copy_(torch.as_tensor(a, device=f"cuda:{self.device}").reshape(shape))
             else:
                 raise TypeError("actions on the device without torch must be a C-contiguous float64 array")
             return

@@ -25,8 +25,13 @@ def namespace():
         ns.sin, ns.cos, ns.sqrt, ns.inf, ns.pi = math.sin, math.cos, math.sqrt, math.inf, math.pi
         ns.abs, ns.minimum, ns.maximum = abs, min, max
         ns.where = cuda.jit(device=True)(_where)
-        ns.u64, ns.to_float = np.uint64, float
+        import numba
+        if numba.config.ENABLE_CUDASIM:  # the simulator runs the kernels as Python: Python's ints, masked (exact)
+            from ..physics.kernels import SCALAR as ints
+        else:
+            ints = numba_math
+        ns.u64, ns.to_float = ints.u64, ints.to_float
         for name in ("ONE", "GOLDEN", "M1", "M2", "MASK", "U11", "U27", "U30", "U31"):
-            setattr(ns, name, getattr(numba_math, name))
+            setattr(ns, name, getattr(ints, name))
         _NAMESPACE.append(ns)
     return _NAMESPACE[0]

@@ -132,6 +132,9 @@ def observe_rows_device(rows, st, consts, obs):
 # (an impact search, a NEXT_STEP reset, a non-finite action; SAME_STEP's reset after a finished step) go on a
 # list that the rare kernel, one thread per listed env, finishes with step_env itself (or same_step_reset).
 FULL_STEP, RESET_ONLY = 0, 1
+# the fast kernel's per-thread register cap (numba-cuda's max_registers): 80 lets 6 blocks of 128 threads share an
+# SM (37.5 % occupancy; unconstrained it takes about 124, 25 %); ptxas reports its spills (docs/gpu.md)
+FAST_MAX_REGISTERS = 80
 
 
 def enqueue(work, counts, slot, i, what):
@@ -234,10 +237,12 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     phys = physics_build(target, kind, fresh)  # (also picks the threading layer: backends/threads.py)
     stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
     own = phys.cache and cache.cacheable(stages)
-    modules = env_modules(record)
+    modules = env_modules(record) if target != "python" else ()
     if own:
         cache.drop_stale_cache(Path(functional.__file__).with_name("__pycache__"), modules)
-    b = Builder(target, build_variant(target, kind, modules) + f"_{record.name}", cache=own)
+    # (the variant's name ends with the sources' digest: numba names its cache files after it)
+    variant = build_variant(target, kind, modules, record.name) if modules else "python"
+    b = Builder(target, variant, cache=own)
     b.namespace.update({k: v for k, v in phys.namespace.items() if k != "__builtins__"})
     b.origin.update(phys.origin)
     b.add({k: v for k, v in vars(functional).items() if not callable(v) or isinstance(v, type)})

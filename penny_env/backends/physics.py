@@ -13,6 +13,7 @@ bitwise.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 import types
 from pathlib import Path
@@ -65,11 +66,13 @@ def physics_modules() -> tuple:
     from ..physics import batch_loops, flows, kernels, scalar
     from ..physics.laws import COMPILED_LAWS
     from ..physics.tables import COMPILED_FORMULAS
-    from . import builder, cuda_math, numba_math
+    from . import builder
     own = [g for triple in COMPILED_FORMULAS for g in triple if g is not None] + list(COMPILED_LAWS)
     tables = tuple(dict.fromkeys(sys.modules[f.__module__] for f in own if f.__module__.startswith("penny_env.")))
-    return (kernels, flows, scalar, batch_loops, numba_math, cuda_math, builder, generated,
-            importlib.import_module(__name__)) + tables
+    # the math namespaces by their files (importing them imports numba)
+    maths = tuple(types.SimpleNamespace(__name__=name, __file__=importlib.util.find_spec(name).origin)
+                  for name in (f"{__package__}.numba_math", f"{__package__}.cuda_math"))
+    return (kernels, flows, scalar, batch_loops, builder, generated, importlib.import_module(__name__)) + maths + tables
 
 
 # -- what replaces the plain loop's dispatches in a build for one table kind -----------------------------------
@@ -138,9 +141,11 @@ def physics_build(target: str, kind: int, fresh: bool = False) -> Builder:
     return b
 
 
-def build_variant(target: str, kind: int, modules) -> str:
-    """The name part of a build's copies: the table variant, the digest of the sources they inline, the target."""
-    return f"{variant_name(kind)}_{cache.source_digest(modules)}" + ("_cuda" if target == "cuda" else "")
+def build_variant(target: str, kind: int, modules, task: str = "") -> str:
+    """The name part of a build's copies: the table variant (and the task), the digest of the sources they inline
+    (last on the CPU, whose cached files numba names after it), and "cuda" first on CUDA (never cached)."""
+    name = f"{variant_name(kind)}_{task + '_' if task else ''}{cache.source_digest(modules)}"
+    return f"cuda_{name}" if target == "cuda" else name
 
 
 def _physics_build(target, kind):
@@ -155,12 +160,12 @@ def _physics_build(target, kind):
     from ..physics.laws import COMPILED_LAWS
     from ..physics.tables import COMPILED_FORMULAS
     own = target == "cpu" and cache.cacheable(formulas(kind)) and cache.disk_cache_available()
-    modules = physics_modules()
+    modules = physics_modules() if target != "python" else ()
     if own:
         for folder in (Path(scalar.__file__).with_name("__pycache__"), Path(scalar.__file__).parent / "tables" / "__pycache__",
                        generated.generated_dir() / "__pycache__"):
             cache.drop_stale_cache(folder, modules)
-    b = Builder(target, build_variant(target, kind, modules), cache=own)
+    b = Builder(target, build_variant(target, kind, modules) if modules else "python", cache=own)
     for module in (kernels, flows, scalar):
         b.add(module)
     if target == "python":  # the physics as it is (its own dispatches: any table, any law), for every kind

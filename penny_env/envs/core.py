@@ -107,6 +107,23 @@ class Core:
         m = scalar_model(self.params, self.table, self.law, self.settings)
         return env_entry_points(target, m.kind, self.task_record, type(self.k), **options)
 
+    def draw_episodes(self, keys, episodes):
+        """(S (6, N), target (2, N), arc (2, N)): the initial states, targets and marked arcs' directions of
+        episodes ``episodes`` (N,) of the envs with seed keys ``keys`` (N,) uint64 (draws.seed_keys), drawn by
+        the env step's own reset stage (functional.initial_state) on this core's backend."""
+        from ..backends.packing import pack
+        from ..physics.scalar import scalar_model
+        from .functional import EnvState, env_params
+        keys = np.ascontiguousarray(keys, dtype=np.uint64)
+        n = keys.shape[0]
+        st = EnvState(np.zeros((6, n)), np.zeros((4, n)), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n, np.int64),
+                      np.zeros(n), np.zeros(n, np.int64), np.zeros(n), keys,
+                      np.ascontiguousarray(np.broadcast_to(episodes, (n,)), dtype=np.int64), np.zeros(n, bool))
+        m = scalar_model(self.params, self.table, self.law, self.settings)
+        obs = np.empty((n, self.obs_dim), dtype=np.float32)
+        self.entry_points().reset_rows(np.arange(n), tuple(st), pack(env_params(self), m, self.k), obs)
+        return st.S, st.target, st.arc
+
     def __getstate__(self):
         return {"scene": self.scene, "task": self.task, "settings": self.settings, "backend": self.backend}
 

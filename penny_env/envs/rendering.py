@@ -82,6 +82,13 @@ def _has_display() -> bool:
     return True
 
 
+
+class _Arc:
+    """The one field of an env's state that a task's marked_arc reads (the renderer has no other state)."""
+
+    def __init__(self, arc):
+        self.arc = arc
+
 class Renderer:
     """Draws frames for one env; ``width`` pixels across the view."""
 
@@ -135,7 +142,11 @@ class Renderer:
         return img
 
     def _background_with_arc(self, arc):
-        if self.core.plane or not self.core.impacts or self.core.k.all_arc:
+        marked = self.core.task_record.marked_arc
+        if self.core.plane or marked is None:
+            return self._background
+        _, _, cos_hw = marked(self.core.k, _Arc(tuple(arc)))  # (the task's own marked arc: its half-width)
+        if cos_hw < -1.0:  # the whole wall counts
             return self._background
         if self._arc_for != arc:
             img = self._background.copy()
@@ -144,7 +155,7 @@ class Renderer:
             gx, gy = self.core.table.grad(X, Y)
             dist = np.abs(h) / np.maximum(np.hypot(gx, gy), 1e-12)
             cb, sb = arc
-            on = X * cb + Y * sb >= self.core.k.cos_hw * np.hypot(X, Y)
+            on = X * cb + Y * sb >= cos_hw * np.hypot(X, Y)
             img[(dist * self.scale < 2.5) & on] = ARC
             self._arc_for, self._arc_bg = arc, img
         return self._arc_bg
@@ -225,7 +236,8 @@ class Renderer:
         img = self._background_with_arc(arc).copy()
         for (px, py) in trail[:-1]:
             self._disc(img, px, py, 1.2, TRAIL)
-        tol_px = self.core.k.tol * self.scale if not self.core.impacts else 6.0
+        tolerance = getattr(self.core.task, "tolerance", None)  # (a task without a target radius: a dot)
+        tol_px = tolerance * self.scale if tolerance is not None else 6.0
         self._disc(img, target[0], target[1], max(tol_px, 4.0), TARGET)
         x, y, _, ph, _, _ = s
         R = self.core.R

@@ -191,7 +191,8 @@ class PennyVectorEnv(VectorEnv):
         if on_gpu:
             from ..backends.cuda_env import DeviceStep
             outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
-            self._fns = core.entry_points("cuda", max_registers=self.cuda_options.get("max_registers"))
+            from ..backends.env import FAST_MAX_REGISTERS
+            self._fns = core.entry_points("cuda", max_registers=self.cuda_options.get("max_registers", FAST_MAX_REGISTERS))
             self._gpu = DeviceStep(self, self.device, outputs, self.cuda_options.get("kernels", "split"))
             return core
         self._fns = core.entry_points()

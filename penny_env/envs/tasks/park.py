@@ -15,6 +15,15 @@ from .reach import constants as reach_constants
 from .base import TaskRecord, register_task
 
 
+DEFAULT_SPEED_TOLERANCE = 0.01  # [m/s] park's rest speed; controllers of other tasks use it as their rest speed too
+
+
+def rest_speed(task) -> float:
+    """[m/s] The rolling speed under which the penny counts as at rest for a task: park's speed_tolerance, else
+    DEFAULT_SPEED_TOLERANCE (the witnesses' controllers switch modes on it whatever the task)."""
+    return float(getattr(task, "speed_tolerance", DEFAULT_SPEED_TOLERANCE))
+
+
 @dataclass(frozen=True)
 class ParkTask(ReachTask):
     """park: reach's fields and
@@ -25,7 +34,7 @@ class ParkTask(ReachTask):
     """
 
     kind: str = "park"
-    speed_tolerance: float = 0.01
+    speed_tolerance: float = DEFAULT_SPEED_TOLERANCE
     spin_tolerance: float | None = None
     speed_cost: float = 0.1
 

@@ -1,6 +1,6 @@
 """Side-by-side timing of the compiled batch (CompiledBatch) of two checkouts of penny_env.
 
-    python -m penny_env.analysis.compare_compiled_batch OTHER_CHECKOUT [--n 4096] [--steps 40] [--rounds 5] [--clock cpu]
+    python -m devtools.compare_compiled_batch OTHER_CHECKOUT [--n 4096] [--steps 40] [--rounds 5] [--clock cpu]
 
 Runs the same workload (the 4 built-in scenes' tables and laws, N pennies with random inside states
 and random torques in the scene's limits, `steps` control periods of the scene's control_dt) with

@@ -1,6 +1,6 @@
 """Throughput of the environments, side by side with Gymnasium's classic-control envs.
 
-    python -m penny_env.analysis.throughput [--quick] [--out docs/throughput.md]
+    python -m devtools.throughput [--quick] [--out docs/throughput.md]
 
 Measured in one run on this machine:
 
@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> str:
              f"- Python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
              f"numba {_numba_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
-             f"- command: `python -m penny_env.analysis.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
+             f"- command: `python -m devtools.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
              load_line(), stamp_line("docs/throughput.md"),
              f"- every rate: the best of {repeats} run(s), for every env alike",
              "", "## Single environment (gymnasium.make, random actions, resets included)", "",

@@ -1,6 +1,6 @@
 """The vector env's throughput on a quiet machine and beside a busy process, for each threading setup.
 
-    python -m penny_env.analysis.contention [--quick] [--out docs/contention.md]
+    python -m devtools.contention [--quick] [--out docs/contention.md]
 
 A learner (SB3, torch) beside the vector env keeps a core busy. numba's parallel loop then shares the
 cores with it, and how its idle threads wait decides the throughput: OpenMP's threads spin by default
@@ -115,7 +115,7 @@ def measure(setups, n: int, steps: int, repeats: int) -> list[dict]:
 
 
 def report(rows, n: int, steps: int, repeats: int, command: str, load_before: float) -> str:
-    from .provenance import stamp_line
+    from penny_env.analysis.provenance import stamp_line
     when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     ref = next((r for r in rows if r["setup"] == "penny_env default"), None)
     lines = ["# Vector env beside a busy process", "",
@@ -155,7 +155,7 @@ def main(argv=None) -> None:
         n, steps, repeats, setups = 64, 20, 1, ["penny_env default", "1 thread"]
     else:
         n, steps, repeats, setups = args.num_envs, args.steps, args.repeats, args.setups or list(SETUPS)
-    command = "python -m penny_env.analysis.contention " + shlex.join(argv if argv is not None else sys.argv[1:])
+    command = "python -m devtools.contention " + shlex.join(argv if argv is not None else sys.argv[1:])
     load_before = os.getloadavg()[0]
     text = report(measure(setups, n, steps, repeats), n, steps, repeats, command.strip(), load_before)
     if args.out:

@@ -1,6 +1,6 @@
 """Throughput of two source trees of penny_env, side by side in one run (before / after a change).
 
-    python -m penny_env.analysis.throughput_compare --before OLD_TREE --after NEW_TREE [--rounds 3] [--out FILE]
+    python -m devtools.throughput_compare --before OLD_TREE --after NEW_TREE [--rounds 3] [--out FILE]
 
 Each tree is measured in its own subprocess (``PYTHONPATH=TREE``, so each imports its own penny_env) and the
 two alternate, round after round, so that both see the same load of a shared machine. ``--clock cpu`` times
@@ -17,7 +17,7 @@ the ratio within a round (the two trees measured back to back, in the same order
 measurement whose ratio of either kind shows a loss of more than ``--tolerance`` (default 5%).
 
 ``--busy``: one spinning Python process runs beside the whole measurement (a learner's core, as users
-train beside the env; penny_env.analysis.contention compares threading setups that way); the report's
+train beside the env; devtools.contention compares threading setups that way); the report's
 sources line is then that of docs/throughput_compare_busy.md (provenance.REPORTS).
 
 ``--quick`` (tests): one round, two ids, N <= 16, few steps, and the report goes to a temporary directory
@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> str:
             spinner.kill()
             spinner.wait()
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
-    cmd = "python -m penny_env.analysis.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
+    cmd = "python -m devtools.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
     # (imported here: the workers run this file against other source trees, which may lack these)
     from penny_env.analysis.common import load_line
     from penny_env.analysis.provenance import stamp_line

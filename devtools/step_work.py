@@ -1,6 +1,6 @@
 """Work per env-step by preset (issue 10.6: why PennyPark-Stadium-v0 at N = 4096 ran slower).
 
-    python -m penny_env.analysis.step_work [--n 256] [--steps 292] [--quick]
+    python -m devtools.step_work [--n 256] [--steps 292] [--quick]
 
 1. Counters (the plain-Python step, instrumented): event-loop calls, impact searches, search
    iterations, curvature steps and impacts per env-step, random actions, NEXT_STEP autoreset.
