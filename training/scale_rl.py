@@ -1,7 +1,7 @@
 """Pure PPO at scale on the single-input probes: evaluation success against samples, beside the witnessed rate.
 
     python -m training.scale_rl [--cells Steer:stadium:elastic Drive:ellipse:plastic] [--steps 100000000]
-                                [--seeds 2] [--num-envs 4096] [--num-steps 32] [--curve-points 10]
+                                [--seeds 2] [--num-envs 8192] [--num-steps 32] [--curve-points 10]
                                 [--eval-episodes 200] [--device auto] [--env-backend cuda] [--quick] [--out REPORT.md]
 
 The question (issue 30 item 7): does pure RL learn the single-input probes when it gets GPU-scale experience? At
@@ -187,9 +187,9 @@ def parse(argv=None):
     ap.add_argument("--cells", nargs="+", default=None, help=f"PROBE:TABLE:LAW cells (default {' '.join(DEFAULT_CELLS)})")
     ap.add_argument("--steps", type=float, default=1e8, help="env steps per seed (default 1e8)")
     ap.add_argument("--seeds", type=int, default=2)
-    ap.add_argument("--num-envs", type=int, default=4096)
+    ap.add_argument("--num-envs", type=int, default=8192)
     ap.add_argument("--num-steps", type=int, default=32)
-    ap.add_argument("--minibatch-size", type=int, default=32768)
+    ap.add_argument("--minibatch-size", type=int, default=65536)
     ap.add_argument("--update-epochs", type=int, default=4)
     ap.add_argument("--curve-points", type=int, default=10)
     ap.add_argument("--eval-episodes", type=int, default=200)

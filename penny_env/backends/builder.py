@@ -296,13 +296,20 @@ class PreparedLaunch:
         self._cukernel = kernel._codelibrary.get_cufunc().kernel
         self._kernelargs = kernelargs
         self._launch = nd.launch
+        from numba.cuda.cudadrv.driver import _to_core_stream
+        self._to_core_stream = _to_core_stream
+        self._core_streams = {}  # id(numba stream) -> (that stream, cuda.core's view of it): converted once
         self.registers = kernel.get_regs_per_thread() if hasattr(kernel, "get_regs_per_thread") else None
 
     def launch(self, stream=0):
+        """The kernel on ``stream`` (numba's stream object, or 0 for the default stream)."""
         if self.n == 0:
             return
         if self.fast:
-            self._launch(stream, self._config, self._cukernel, *self._kernelargs)
+            held = self._core_streams.get(id(stream))
+            if held is None:
+                held = self._core_streams[id(stream)] = (stream, self._to_core_stream(stream))
+            self._launch(held[1], self._config, self._cukernel, *self._kernelargs)
         else:
             self.loop.kernel[self.blocks, self.threads, stream](*self.args)
 
