@@ -8,8 +8,7 @@
    99.99th percentile and the largest cost of one penny's step (a penny stuck in a slow search
    would stand out), and the pennies with more than 8 impacts in a step (what 960f394's vector step
    reran alone, serially, to fill its impact buffer).
-3. Resets (at N = 4096): envs reset per step and the time the vector env spends resetting them,
-   against the whole step."""
+(Resets are drawn per env inside the step since the step carries its autoreset: functional.step_env.)"""
 from __future__ import annotations
 
 import argparse
@@ -19,7 +18,6 @@ import gymnasium as gym
 import numpy as np
 
 import penny_env  # noqa: F401
-from penny_env.envs import functional
 from penny_env.physics import scalar
 
 PRESETS = ("PennyPark-Stadium-v0", "PennyImpacts-Stadium-v0", "PennyPark-Circle-v0", "PennyImpacts-Ellipse-v0",
@@ -61,9 +59,11 @@ def counters(n, steps):
 
 
 def penny_costs(n, steps):
+    """One penny's compiled single-env step (the same stages as a vector env's row), timed on the vector env's own
+    states step after step: its median, tail and the cost of pennies with many impacts."""
     for env_id in PRESETS:
         venv = gym.make_vec(env_id, num_envs=n).unwrapped
-        fn = functional.compiled_env_functions(venv._m.kind)["env_step"]
+        fn = venv._core.entry_points("cpu").env_step
         venv.reset(seed=0)
         venv.action_space.seed(0)
         obs = np.empty((1, venv._core.obs_dim), np.float32)
@@ -71,10 +71,11 @@ def penny_costs(n, steps):
         costs, heavy = [], []
         for t in range(steps):
             a = venv.action_space.sample()
-            S, trig, cnt, d, st = venv._S.copy(), venv._trig.copy(), venv._count.copy(), venv._d.copy(), venv._steps.copy()
-            for i in np.flatnonzero(~venv._autoreset):  # (the envs that reset at this step take no step)
-                state = (tuple(S[:, i]), tuple(trig[:, i]), (venv._target[0, i], venv._target[1, i]),
-                         (venv._arc[0, i], venv._arc[1, i]), int(cnt[i]), d[i], int(st[i]), venv._t[i])
+            st = venv._st
+            S, trig, cnt, d, stp = st.S.copy(), st.trig.copy(), st.count.copy(), st.dist.copy(), st.steps.copy()
+            for i in np.flatnonzero(~st.pending):  # (the envs that reset at this step take no step)
+                state = (tuple(S[:, i]), tuple(trig[:, i]), (st.target[0, i], st.target[1, i]),
+                         (st.arc[0, i], st.arc[1, i]), int(cnt[i]), d[i], int(stp[i]), st.time[i])
                 args = (state, float(a[i, 0]), float(a[i, -1]), venv._consts, obs, buf)
                 if t == 0 and not costs:
                     fn(*args)  # the first call checks the argument types: not a penny's cost
@@ -92,32 +93,6 @@ def penny_costs(n, steps):
               f"{np.median(h):.0f} us (median), {h.max():.0f} us (max)", flush=True)
 
 
-def reset_costs(n, steps):
-    for env_id in PRESETS:
-        venv = gym.make_vec(env_id, num_envs=n)
-        env = venv.unwrapped
-        spent = {"time": 0.0, "envs": 0}
-        reset_envs = env._reset_envs
-
-        def timed(mask, *args):
-            t0 = time.perf_counter()
-            out = reset_envs(mask, *args)
-            spent["time"] += time.perf_counter() - t0
-            spent["envs"] += int(np.count_nonzero(mask))
-            return out
-        env._reset_envs = timed
-        venv.reset(seed=0)
-        venv.action_space.seed(0)
-        acts = [venv.action_space.sample() for _ in range(steps)]
-        spent.update(time=0.0, envs=0)
-        t0 = time.perf_counter()
-        for a in acts:
-            venv.step(a)
-        total = time.perf_counter() - t0
-        print(f"{env_id:26s} N={n}: step {total / steps * 1e6:.0f} us; resets {spent['envs'] / steps:.1f} envs per step, "
-              f"{spent['time'] / steps * 1e6:.1f} us per step ({spent['time'] / total:.1%})", flush=True)
-
-
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=256, help="envs for the counters (plain Python: keep it small)")
@@ -128,4 +103,3 @@ if __name__ == "__main__":
     steps = 5 if args.quick else args.steps
     counters(16 if args.quick else args.n, steps)
     penny_costs(n_big, steps)
-    reset_costs(n_big, steps)

@@ -24,10 +24,10 @@ def rel_close(a, b, rel=1e-12):
         return bool(np.all(same | (np.abs(a - b) <= rel * np.maximum(np.abs(a), np.abs(b)))))
 
 
-def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernels="split", episode_steps=12):
-    """The CPU and the CUDA backend (numpy outputs) over ``steps`` steps of short episodes (``episode_steps``), so
-    that the autoreset of ``mode`` runs on the device many times: every output equal, DISABLED's resets through
-    reset_mask."""
+def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernels="split", episode_steps=None):
+    """The CPU and the CUDA backend (numpy outputs) over ``steps`` steps (episodes of ``episode_steps``, short ones
+    where the autoreset of ``mode`` is to run on the device many times): every output equal, DISABLED's resets
+    through reset_mask."""
     kw = {} if scene == "plane" else {"law": law}
     cpu = PennyVectorEnv(n, scene, task, backend="numba", autoreset_mode=mode, max_episode_steps=episode_steps, **kw)
     gpu = PennyVectorEnv(n, scene, task, backend="cuda", outputs="numpy", autoreset_mode=mode,
@@ -64,7 +64,7 @@ def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernel
     assert rel_close(cpu.states, gpu.states), "final states differ"
     bitwise = bool(np.array_equal(cpu.states, gpu.states))
     return {"case": f"vector {scene} {task} {law} {mode.value} {kernels}", "impacts": impacts, "resets": resets,
-            "bitwise": bitwise}
+            "episode_steps": episode_steps, "bitwise": bitwise}
 
 
 def batch_case(table, law):
@@ -90,9 +90,9 @@ def main():
     for scene, task, law in CASES:
         print(json.dumps(vector_case(scene, task, law, 6, steps)), flush=True)
     # every autoreset mode, and the one-kernel step, across many episode ends
-    for mode in (AutoresetMode.SAME_STEP, AutoresetMode.DISABLED):
-        print(json.dumps(vector_case("stadium", "impacts", "elastic", 6, steps, mode)), flush=True)
-    print(json.dumps(vector_case("circle", "park", 0.5, 6, steps, AutoresetMode.SAME_STEP, "one")), flush=True)
+    for mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED):
+        print(json.dumps(vector_case("stadium", "impacts", "elastic", 6, steps, mode, episode_steps=12)), flush=True)
+    print(json.dumps(vector_case("circle", "park", 0.5, 6, steps, AutoresetMode.SAME_STEP, "one", 12)), flush=True)
     for table, law in ((Ellipse(0.15, 0.2), "elastic"), (Stadium(0.1, 0.15), "plastic"), (Circle(0.12), 0.5)):
         print(json.dumps(batch_case(table, law)), flush=True)
 

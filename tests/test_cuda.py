@@ -159,13 +159,14 @@ def _simulator(script, *args, timeout=900):
 @pytest.mark.slow
 def test_cuda_backend_equals_cpu_under_the_simulator():
     rows = _simulator("cuda_sim_check.py", "60")
-    assert len(rows) == 11
+    assert len(rows) == 12
     walled = [row for row in rows if "plane" not in row["case"]]
     assert all(row["bitwise"] for row in rows)
     assert sum(row["impacts"] for row in walled) > 150 and all(row["impacts"] > 0 for row in walled)
     modes = {row["case"].split()[4] for row in rows if row["case"].startswith("vector")}
     assert modes == {"NextStep", "SameStep", "Disabled"}
-    assert all(row["resets"] > 6 for row in rows if row["case"].startswith("vector"))
+    short = [row for row in rows if row.get("episode_steps") == 12]  # (episodes of 12 steps: many device resets)
+    assert len(short) == 4 and all(row["resets"] > 6 for row in short)
 
 
 @needs_numba_cuda

@@ -10,8 +10,7 @@ def test_step_work_quick_reports_every_preset(capsys):
     from devtools import step_work
     step_work.counters(8, 2)
     step_work.penny_costs(16, 3)
-    step_work.reset_costs(16, 3)
     out = capsys.readouterr().out
     for preset in step_work.PRESETS:
-        assert out.count(preset) == 3, preset
+        assert out.count(preset) == 2, preset
     assert "search iterations" in out and "99.99th percentile" in out and "envs per step" in out

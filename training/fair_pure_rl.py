@@ -80,6 +80,17 @@ DEMO_SEED = 100_000  # witness demonstrations (sac_witness): seeds DEMO_SEED + i
 VAL_SEED = 50_000  # the curves' validation episodes (as training/fair_rl.py)
 GAMMA = 0.999
 REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "success_bonus": 10.0}
+
+
+def reward_fields(env_id: str, overrides=None) -> dict:
+    """REWARD's fields that the env's task has (speed_cost is park's; a reach probe has none to zero)."""
+    from penny_env.envs.scene import env_presets
+    from penny_env.envs.tasks import config_fields
+    spec = {**env_presets()[env_id], **(overrides or {})}
+    from penny_env.envs.scene import _preset
+    kind = spec.get("kind", _preset("task", spec["task"]).get("kind", "reach"))
+    fields = config_fields(kind)
+    return {k: v for k, v in REWARD.items() if k in fields}
 AGENTS = ("ppo", "sac", "sac_witness")
 DEFAULT_CELLS = (("Steer", "ellipse", "elastic"), ("Steer", "stadium", "elastic"),
                  ("Steer", "rounded_rectangle", "elastic"),
@@ -125,7 +136,7 @@ def witness_transitions(env_id, overrides, seeds):
     dict of arrays obs, next_obs, action, reward, done, timeout; and the number of certified episodes."""
     import gymnasium as gym
     w = Witness(env_id, overrides)
-    env = gym.make(env_id, **overrides, **REWARD)
+    env = gym.make(env_id, **overrides, **reward_fields(env_id, overrides))
     out = {k: [] for k in ("obs", "next_obs", "action", "reward", "done", "timeout")}
     n_ok = 0
     try:
@@ -190,7 +201,7 @@ def train_one(cell, agent, seed, cfg, demo=None, log=print):
     steps = budget(agent, probe, cfg)
     n_envs = cfg["num_envs"]
     t0 = time.perf_counter()
-    venv = VecMonitor(PennySB3VecEnv(env_id, num_envs=n_envs, **overrides, **REWARD))
+    venv = VecMonitor(PennySB3VecEnv(env_id, num_envs=n_envs, **overrides, **reward_fields(env_id, overrides)))
     venv.seed(TRAIN_SEED + 10_000 * seed)
     if agent == "ppo":
         hyper = dict(PPO_HYPER, batch_size=min(PPO_HYPER["batch_size"], PPO_HYPER["n_steps"] * n_envs))

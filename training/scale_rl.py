@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.fair_pure_rl import GAMMA, REWARD
+from training.fair_pure_rl import GAMMA, REWARD, reward_fields
 from training.study_report import clopper_pearson, seed_clustered_ci
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -68,7 +68,7 @@ def ppo_args(cell, seed: int, a, out: Path):
     from training.ppo_torch import Args
     from training.witness_study import cell_spec
     env_id, overrides = cell_spec(*cell)
-    return Args(env_id=env_id, env_kwargs={**overrides, **REWARD}, num_envs=a.num_envs, total_timesteps=a.steps,
+    return Args(env_id=env_id, env_kwargs={**overrides, **reward_fields(env_id, overrides)}, num_envs=a.num_envs,
                 seed=seed, device=a.device, env_backend=a.env_backend, num_steps=a.num_steps,
                 minibatch_size=a.minibatch_size, update_epochs=a.update_epochs, gamma=GAMMA, gae_lambda=0.98,
                 eval_episodes=a.eval_episodes, curve_points=a.curve_points, quick=False,
