@@ -186,7 +186,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     (physics/compiled.py), "cuda" the same functions on a GPU, one thread per penny (numpy in and out,
     copied each interval; docs/gpu.md), "python" the same loop in plain Python (slow: for debugging and tests);
     "auto" (default) takes numba where it is installed and the table compiles (with a one-time
-    warning otherwise). Both give bitwise the same results (tests/test_compiled.py)."""
+    warning otherwise). Both give bitwise the same results (tests/test_compiled.py). A law or a table that
+    breaks its contract at an impact raises a ValueError naming it and the penny (physics/faults.py)."""
     params = check_params(params)
     tab = _table(table, params)
     law = make_law(law)

@@ -256,7 +256,7 @@ def test_single_env_backends_agree(kw):
 
 # -- the entry points' packing of the constants, and the CPU loop's hoisting ---------------------------------
 def test_pack_round_trips_every_field_exactly():
-    """pack() holds the 56 constants in one float64 array (ints and bools as int64 bits): unpack() gives
+    """pack() holds the 57 constants in one float64 array (ints and bools as int64 bits): unpack() gives
     back the very records, the int64 range included (the single env's max_steps is int64's max)."""
     core = Core(*resolve("stadium", "impacts"), backend="python")
     p = functional.env_params(core, np.iinfo(np.int64).max)
@@ -272,7 +272,7 @@ def test_pack_round_trips_every_field_exactly():
             assert type(a) is type(b), name
             if isinstance(a, float):
                 assert _bits(a) == _bits(b), name
-    with pytest.raises(ValueError, match="56 fields"):
+    with pytest.raises(ValueError, match="57 fields"):
         functional.pack(p, m, ())
 
 

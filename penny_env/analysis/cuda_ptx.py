@@ -3,7 +3,8 @@
 ``python -m penny_env.analysis.cuda_ptx [--cc 9.0 8.0]`` compiles, for every registered table kind and the
 open plane, the kernels of the GPU backend (physics/builder.py, target "cuda"): the vector env's step and
 observation kernels (envs/functional.py), its reset kernel (envs/cuda_step.py), and the batch's event loop
-and first-impact search (physics/compiled.py); the law dispatch inside them covers every registered law.
+and first-impact search (physics/compiled.py); the law dispatch inside them covers the built-in laws (a
+user's law enters only the builds that run it: compiled.build_laws).
 It prints one line per kernel with the PTX size and the compile time.
 
 numba-cuda looks up the current device's compute capability when it compiles device functions; on a
@@ -46,7 +47,7 @@ def example_arguments(n: int = 4, K: int = 2):
 
 def cuda_kernels(kind: int, fresh: bool = True) -> dict:
     """name -> launcher (physics/builder.py) of every CUDA kernel for table kind ``kind``; under "laws", the
-    build's device functions of the registered laws (compiled into the kernels by the law dispatch)."""
+    build's device functions of its laws, the built-in ones (compiled into the kernels by the law dispatch)."""
     from ..envs import cuda_step
     from ..envs.functional import compiled_env_functions
     from ..physics.builder import Builder

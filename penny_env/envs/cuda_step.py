@@ -71,7 +71,7 @@ class CudaStep:
         self.device = 0 if device is None else int(device)
         self.outputs = outputs
         self.env = env
-        self.fns = compiled_env_functions(kind, "cuda")
+        self.fns = compiled_env_functions(kind, "cuda", law=env._m.law)
         b = Builder("cuda", f"reset_{kind}")
         b.copy(reset_row)
         self.reset_rows = b.loop(reset_rows)
@@ -138,6 +138,6 @@ class CudaStep:
         dev = cuda.device_array
         out = StepResults(dev((n, obs_dim), np.float32), dev(n), dev(n, np.bool_), dev(n, np.bool_), dev(n), dev(n, np.int8))
         buf = ImpactBuffers(dev(n, np.int64), dev((n, K)), dev((n, K), np.int8), dev((n, K, 6)), dev((n, K), np.int8),
-                            dev(n, np.int64))
+                            dev(n, np.int64), dev(n, np.int8))
         self.fns["step_envs_kernel"](self.st, a, cuda.to_device(np.ascontiguousarray(skip)), self.p, self.m, self.k, out, buf)
         return out, buf

@@ -29,17 +29,20 @@ from typing import NamedTuple
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import NO_ARC, WHOLE_WALL, ImpactBuffers, Model, clear_row, run_interval
+from ..physics.scalar import (FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, NO_ARC, WHOLE_WALL, ImpactBuffers, Model,
+                              clear_row, run_interval)
 from .tasks import TaskConstants, step_reward
 
 XP = SCALAR      # the math namespace of tasks.py's formulas (numba_math in the compiled copies)
 prange = range   # numba.prange in the compiled copies
 
-_COMPILED: dict = {}  # physics/compiled.py's variant_key(kind) -> compiled entry points
+_COMPILED: dict = {}  # (target,) + physics/compiled.py's variant_key(kind, law) -> compiled entry points
 
-# info["limit"]: which documented limit ended an episode (truncated), docs/envs.md#limits
+# info["limit"]: which documented limit ended an episode (truncated), docs/envs.md#limits; 3 to 5: the event
+# loop's run-time guard stopped the step at an impact (scalar.FAULT_* + 2, physics/faults.py)
 LIMIT_NONE, LIMIT_SPEED, LIMIT_IMPACTS = 0, 1, 2
-LIMIT_NAMES = ("", "speed", "impacts")
+LIMIT_LAW_NONFINITE, LIMIT_LAW_ENERGY, LIMIT_OUTSIDE_WALL = 3, 4, 5
+LIMIT_NAMES = ("", "speed", "impacts", "law_nonfinite", "law_energy", "outside_wall")
 
 
 class EnvParams(NamedTuple):
@@ -177,7 +180,7 @@ def _check_positions():
     this order."""
     assert EnvState._fields == ("S", "trig", "target", "arc", "count", "dist", "steps", "time")
     assert StepResults._fields == ("obs", "reward", "terminated", "truncated", "kinetic_energy", "limit")
-    assert ImpactBuffers._fields == ("count", "time", "end", "post", "rest", "arc_count")  # (also scalar.clear_row)
+    assert ImpactBuffers._fields == ("count", "time", "end", "post", "rest", "arc_count", "fault")  # (also scalar.clear_row)
 
 
 _check_positions()
@@ -204,8 +207,10 @@ def env_step(st, a0, a1, p, m, k, buf, row):
     episode ends, the motion is never altered): LIMIT_IMPACTS when the period needed more than the
     event cap's impacts (the state is then the one at `elapsed` < dt), LIMIT_SPEED when the new
     state's |theta_dot| > p.W_max or |phi_dot| > p.w_max (a further step could pass
-    MAX_ANGULAR_SPEED). So every step does bounded work: at most m.max_events impacts, from a state
-    within the speed limits.
+    MAX_ANGULAR_SPEED), and LIMIT_LAW_NONFINITE, LIMIT_LAW_ENERGY, LIMIT_OUTSIDE_WALL where the event loop's
+    run-time guard stopped the period at an impact (a law or a table breaking its contract, physics/faults.py;
+    the state is the one of that impact, finite). So every step does bounded work: at most m.max_events
+    impacts, from a state within the speed limits.
 
     Returns (new PennyState, observation (observe()'s tuple), reward, terminated, truncated, kinetic
     energy, limit)."""
@@ -221,7 +226,18 @@ def env_step(st, a0, a1, p, m, k, buf, row):
                                arc_window(st, p, k))
     limit = LIMIT_NONE
     if elapsed < p.dt:
-        limit = LIMIT_IMPACTS
+        # the event cap, or the run-time guard at an impact (scalar.advance_into; the fault is read only here,
+        # off the hot path: a guard's stop at an impact exactly at the period's end is seen at the next step,
+        # which meets that impact again at once)
+        fault = buf.fault[row]
+        if fault == FAULT_NONE:
+            limit = LIMIT_IMPACTS
+        elif fault == FAULT_NONFINITE:
+            limit = LIMIT_LAW_NONFINITE
+        elif fault == FAULT_ENERGY:
+            limit = LIMIT_LAW_ENERGY
+        else:
+            limit = LIMIT_OUTSIDE_WALL
     elif abs(s1[4]) > p.W_max or abs(s1[5]) > p.w_max:
         limit = LIMIT_SPEED
     count = st.count + buf.arc_count[row]
@@ -416,7 +432,7 @@ def _vector_count(args):
     return args[1].shape[0]  # step_envs_packed's actions (N, n_act)
 
 
-def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) -> dict:
+def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False, law: int = -1) -> dict:
     """PYTHON_FUNCTIONS built for ``target`` (physics/builder.py) for the scenes whose Model.kind is
     ``kind`` (the open plane: scalar.OTHER), once per process for each target, kind and registry state.
     CPU: numba copies whose globals hold the compiled physics and task functions (physics/compiled.py's
@@ -424,13 +440,15 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
     vector step's loop parallel over envs. CUDA: device functions, and the loops step_envs and
     observe_rows as kernels (one thread per env) taking the records (NamedTuples of device arrays)
     and the NamedTuples of constants: entries "step_envs_kernel" and "observe_rows_kernel". fresh: build
-    anew (physics included) and keep nothing (the PTX tests compile each compute capability from scratch)."""
+    anew (physics included) and keep nothing (the PTX tests compile each compute capability from scratch).
+    law: the Model.law of the scenes (-1: a built-in law); a user's law is compiled only into its own builds
+    (physics/compiled.py's build_laws)."""
     from ..physics import compiled
     from ..physics.builder import check_target
 
     target = check_target(target)
     kind = compiled.check_kind(kind)
-    key = (target,) + compiled.variant_key(kind)
+    key = (target,) + compiled.variant_key(kind, law)
     if key in _COMPILED and not fresh:
         return _COMPILED[key]
     if target == "python":
@@ -438,7 +456,7 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
         return PYTHON_FUNCTIONS
     from . import functional, tasks
 
-    phys = compiled.physics_build(target, kind, fresh)  # (also picks the threading layer: physics/parallel.py)
+    phys = compiled.physics_build(target, kind, fresh, law)  # (also picks the threading layer: physics/parallel.py)
     own = phys.cache
     modules = compiled.physics_modules() + (tasks, functional)
     if own:
@@ -483,14 +501,14 @@ def compiled_env_functions(kind: int, target: str = "cpu", fresh: bool = False) 
     return fns
 
 
-def env_functions(backend: str, kind: int) -> dict:
+def env_functions(backend: str, kind: int, law: int = -1) -> dict:
     """The entry points of a backend ("env_step", "step_envs", "observe_rows", "initial_observation",
     taking consts = pack(p, m, k)): "numba" (compiled for Model.kind ``kind``: it must be m.kind of
     the consts they will receive, as the compiled physics calls that table's formulas whatever m
     says), "cuda" (the kernels, see compiled_env_functions) or "python" (these functions as they are,
-    for any kind)."""
+    for any kind); law: the Model.law they will receive (a user's law is compiled into its own builds only)."""
     if backend == "numba":
-        return compiled_env_functions(kind, "cpu")
+        return compiled_env_functions(kind, "cpu", law=law)
     if backend == "cuda":
-        return compiled_env_functions(kind, "cuda")
+        return compiled_env_functions(kind, "cuda", law=law)
     return PYTHON_FUNCTIONS

@@ -12,7 +12,9 @@ from gymnasium.error import ResetNeeded
 from ..physics.compiled import announce_compile
 from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys
-from .functional import env_functions, env_params, kinetic_energy, pack
+from ..physics.faults import warn_episode_fault
+from .limits import check_int64, check_memory, single_env_bytes
+from .functional import LIMIT_LAW_NONFINITE, LIMIT_NAMES, env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
@@ -128,7 +130,12 @@ class PennyEnv(gym.Env):
                         (|theta_dot| or |phi_dot| past Scene.step_speed_limits(): one more step
                         could pass MAX_ANGULAR_SPEED), 2 "impacts" (the step needed more than
                         SolverSettings.max_events_per_interval impacts: the state and ``time`` are
-                        those right after the last one, inside the period); names in
+                        those right after the last one, inside the period); 3 "law_nonfinite",
+                        4 "law_energy" (the impact law returned a non-finite velocity or added
+                        kinetic energy at an impact), 5 "outside_wall" (an end was found outside the
+                        wall: the table's bounds are false): the event loop's run-time guard
+                        stopped the step at that impact, with a RuntimeWarning naming the law or
+                        the table (docs/envs.md#limits); names in
                         ``penny_env.envs.functional.LIMIT_NAMES``
     ==================  ==========================================================================
 
@@ -136,8 +143,9 @@ class PennyEnv(gym.Env):
     speeds are checked at construction, and the limits above end the episode before a step could
     need more (docs/envs.md#limits). The motion is never altered.
 
-    **Interrupted steps.** A step interrupted by an exception (KeyboardInterrupt) may leave its
-    bookkeeping half done; the next step() then raises ResetNeeded until reset() is called.
+    **Interrupted steps and resets.** A step or a reset interrupted by an exception (KeyboardInterrupt)
+    may leave its bookkeeping half done; the next step() then raises ResetNeeded until reset() is called.
+    A reset whose seed or options are refused changes nothing.
 
     ``reset`` returns the same keys (no impacts, ``is_success`` False). ``max_impacts_in_info``
     (default 8) sets the width of the impact arrays; a larger one keeps more of a step's impacts.
@@ -157,6 +165,9 @@ class PennyEnv(gym.Env):
             raise TypeError(f"max_impacts_in_info must be an integer, got {type(max_impacts_in_info).__name__}")
         if max_impacts_in_info < 0:
             raise ValueError(f"max_impacts_in_info must be >= 0, got {max_impacts_in_info}")
+        check_int64("max_impacts_in_info", max_impacts_in_info)
+        check_memory("max_impacts_in_info", max_impacts_in_info, single_env_bytes(int(max_impacts_in_info)),
+                     "PennyEnv's impact buffers")
         self.max_impacts_in_info = int(max_impacts_in_info)
         self.backend = backend
         self.truncate = truncate
@@ -186,7 +197,7 @@ class PennyEnv(gym.Env):
         # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes)
         self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
-        self._fns = env_functions(core.backend, self._m.kind)
+        self._fns = env_functions(core.backend, self._m.kind, self._m.law)
         self._consts = pack(self._p, self._m, core.k)
         self._buffers(max(IMPACTS_BUFFER, self.max_impacts_in_info))
         if core.backend == "numba":  # load the machine code now, not in the first step
@@ -218,42 +229,47 @@ class PennyEnv(gym.Env):
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
+        # The seed and the options are checked first: a bad one raises and changes nothing. The new episode is
+        # then drawn into locals and stored; from the first change on, _in_step is set, so that a reset
+        # interrupted there (Ctrl-C) makes the next step() raise ResetNeeded, as an interrupted step does.
         if seed is not None:
             seed = check_seed(seed)
-        super().reset(seed=seed)
         core = self._core
-        if seed is not None:
-            self._key = seed_keys([seed])
-            self._episode = 0
-        elif self._key is None:
-            self._key = seed_keys([int(self.np_random.integers(0, 2**63))])
-            self._episode = 0
-        else:
-            self._episode += 1
-        S, target, arc = core.sample(self._key, np.array([self._episode], dtype=np.uint64))
+        state = tgt = None
         if options is not None:
             state, tgt = core.check_options(options, 1)
-            if state is not None:
-                S = state.T
-            if tgt is not None:
-                target = tgt.T
-        self._s = tuple(S[:, 0].tolist())
-        self._target = (float(target[0, 0]), float(target[1, 0]))
+        self._in_step = True
+        super().reset(seed=seed)
+        if seed is not None:
+            key, episode = seed_keys([seed]), 0
+        elif self._key is None:
+            key, episode = seed_keys([int(self.np_random.integers(0, 2**63))]), 0
+        else:
+            key, episode = self._key, self._episode + 1
+        S, target, arc = core.sample(key, np.array([episode], dtype=np.uint64))
+        if state is not None:
+            S = state.T
+        if tgt is not None:
+            target = tgt.T
+        s = tuple(S[:, 0].tolist())
+        target = (float(target[0, 0]), float(target[1, 0]))
+        obs = np.empty((1, core.obs_dim), dtype=np.float32)
+        trig = self._fns["initial_observation"](obs, s, target[0], target[1], self._consts)
+        x, y = s[0], s[1]
+        dx, dy = target[0] - x, target[1] - y
+        self._key, self._episode = key, episode
+        self._s, self._trig, self._target = s, trig, target
         self._arc = (float(arc[0, 0]), float(arc[1, 0]))
         self._steps = 0
         self._count = 0
         self._t = 0.0
-        self._done = False
-        self._in_step = False
-        x, y = self._s[0], self._s[1]
-        dx, dy = self._target[0] - x, self._target[1] - y
         self._d = math.sqrt(dx * dx + dy * dy)
         self._trail.clear()
         self._trail.append((x, y))
         self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
-        obs = np.empty((1, core.obs_dim), dtype=np.float32)
-        self._trig = self._fns["initial_observation"](obs, self._s, self._target[0], self._target[1], self._consts)
+        self._done = False
         info = self._info(0, (), (), kinetic_energy(self._s, self._p), False)
+        self._in_step = False  # (last: the episode is whole and its first observation and info made)
         if self.render_mode == "human":
             self.render()
         return obs[0], info
@@ -264,7 +280,7 @@ class PennyEnv(gym.Env):
         if self._done:
             raise ResetNeeded("PennyEnv.step() called after the episode ended; call reset()")
         if self._in_step:
-            raise ResetNeeded("PennyEnv.step(): the previous step was interrupted (an exception such as "
+            raise ResetNeeded("PennyEnv.step(): the previous step() or reset() was interrupted (an exception such as "
                               "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         c = self._core
         a = _action_list(action, c.n_act)
@@ -298,6 +314,8 @@ class PennyEnv(gym.Env):
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
+        if limit >= LIMIT_LAW_NONFINITE:  # the event loop's guard stopped the step (physics/faults.py)
+            warn_episode_fault(LIMIT_NAMES[limit], limit - 2, c.law, c.table)
         return obs[0], float(reward), terminated, truncated, info
 
     def _info(self, n_imp, times, ends, energy, success, limit=0):

@@ -24,6 +24,7 @@ from ..physics.params import MAX_ANGULAR_SPEED
 from ..physics.tables import Table
 from ..physics.tables.base import LENGTH_RANGE
 from ..physics.validation import check_actuation, check_table, step_speed_limits
+from .limits import INT64_MAX
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 
@@ -60,7 +61,14 @@ def _num(owner: str, name: str, value, *, positive=False, nonneg=False, lo=None,
             else:
                 raise TypeError
         except TypeError:
-            raise ConfigTypeError(f"{owner}.{name} must be a number, got {value!r}") from None
+            hint = ""
+            if isinstance(value, str):
+                try:
+                    float(value)
+                    hint = " (a string: write the number unquoted, e.g. 0.01 or 1.0e-2)"
+                except ValueError:
+                    pass
+            raise ConfigTypeError(f"{owner}.{name} must be a number, got {value!r}{hint}") from None
     value = float(value)
     if not math.isfinite(value):
         raise ConfigError(f"{owner}.{name} must be finite, got {value!r}")
@@ -185,12 +193,23 @@ class Scene:
             raise ConfigError(f"{o}.{exc}") from None
         # the initial speeds: one step at the torque limits from any of them stays within the limits
         W_max, w_max = self.step_speed_limits()
-        for name, bound in (("theta_dot", W_max), ("phi_dot", w_max)):
+        for name, bound, torque in (("theta_dot", W_max, "u2"), ("phi_dot", w_max, "u1")):
             worst = max(abs(v) for v in out[name])
             if worst > bound:
-                raise ConfigError(f"{o}.init.{name} = {out[name]!r} rad/s: |{name}| must be <= {bound:.6g} rad/s, so that "
-                                  f"a step at the torque limits stays within MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} "
-                                  f"rad/s (and MAX_STEERED_PHASE; docs/physics.md#limits)")
+                room = max(bound, 0.0)
+                where = (f"a step at torque_limits.{torque} = {self.torque_limits[torque]!r} N m over control_dt = "
+                         f"{self.control_dt!r} s stays within MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s (and "
+                         "MAX_STEERED_PHASE; docs/physics.md#limits)")
+                if out[name] == list(_range(o, name, INIT_DEFAULTS[name])):
+                    # the range is the default one: the torque limit (or control_dt) the user set leaves no room for it
+                    raise ConfigError(f"{o}.torque_limits.{torque} = {self.torque_limits[torque]!r} N m with control_dt = "
+                                      f"{self.control_dt!r} s leaves room for |{name}| <= {room:.6g} rad/s only (from a "
+                                      f"faster start, one step at that torque could pass MAX_ANGULAR_SPEED = "
+                                      f"{MAX_ANGULAR_SPEED:g} rad/s or MAX_STEERED_PHASE; docs/physics.md#limits), less than "
+                                      f"the default init.{name} = {out[name]!r} rad/s: lower torque_limits.{torque} or "
+                                      f"control_dt (or narrow init.{name})")
+                raise ConfigError(f"{o}.init.{name} = {out[name]!r} rad/s: |{name}| must be <= {room:.6g} rad/s, so that "
+                                  f"{where}")
         lo_len, hi_len = LENGTH_RANGE
         if not lo_len <= self.arena <= hi_len:  # beyond it the squared distances of the reward overflow
             raise ConfigError(f"{o}.arena must be within [{lo_len:g}, {hi_len:g}] m, got {self.arena!r}")
@@ -293,6 +312,8 @@ class Task:
                 raise ConfigTypeError(f"{o}.{name} must be a positive integer, got {v!r}")
             if v < 1:
                 raise ConfigError(f"{o}.{name} must be a positive integer, got {v!r}")
+            if v > INT64_MAX:  # (the compiled step holds it in an int64)
+                raise ConfigError(f"{o}.{name} must be <= 2**63 - 1 = {INT64_MAX} (an int64), got {v!r}")
             object.__setattr__(self, name, int(v))
         object.__setattr__(self, "tolerance", _num(o, "tolerance", self.tolerance, positive=True))
         object.__setattr__(self, "speed_tolerance", _num(o, "speed_tolerance", self.speed_tolerance, positive=True))
@@ -312,9 +333,11 @@ _MERGED = {"params", "torque_limits", "init", "obs_scale"}
 
 def _yaml_load(path: Path) -> dict:
     import yaml
+
+    from .yaml_io import safe_load
     try:
         with open(path) as f:
-            data = yaml.safe_load(f)
+            data = safe_load(f)  # (1e-2 is a float, as in YAML 1.2)
     except FileNotFoundError:
         raise ConfigError(f"config file not found: {path}") from None
     except yaml.YAMLError as exc:

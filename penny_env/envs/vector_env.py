@@ -12,7 +12,9 @@ from ..physics.compiled import announce_compile, compiles
 from ..physics.parallel import SERIAL_BELOW
 from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
-from .functional import env_functions, env_params, kinetic_energy, pack
+from ..physics.faults import warn_episode_fault
+from .limits import check_int64, check_memory, vector_env_bytes
+from .functional import LIMIT_LAW_NONFINITE, LIMIT_NAMES, env_functions, env_params, kinetic_energy, pack
 from .scene import resolve
 
 MAX_IMPACTS_IN_INFO = 8
@@ -45,7 +47,9 @@ class PennyVectorEnv(VectorEnv):
     ``PennyVectorEnv(num_envs, scene="ellipse", task="reach", max_episode_steps=None,
     autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto",
     max_impacts_in_info=8, **overrides)``. max_episode_steps: episodes are truncated after this
-    many steps (None: the task's).
+    many steps (None: the task's). A num_envs beyond int64, or whose arrays would not fit in the
+    memory available now (envs/limits.py estimates the bytes per env), is refused with a
+    ValueError that says how much it needs.
 
     Autoreset (``autoreset_mode``):
 
@@ -70,7 +74,8 @@ class PennyVectorEnv(VectorEnv):
     ``arc_impacts``       impacts task: running count of impacts on the marked arc
     ``is_success``        every step: the task's success condition (True only where it terminated)
     ``limit``             (num_envs,) int8: 0, or the documented limit that truncated the env's
-                          episode (1 "speed", 2 "impacts"; PennyEnv's table)
+                          episode (1 "speed", 2 "impacts", 3 "law_nonfinite", 4 "law_energy",
+                          5 "outside_wall"; PennyEnv's table)
     ====================  =========================================================================
 
     **GPU** (``backend="cuda"``, ``device`` a CUDA device index, ``outputs`` "torch" or "numpy"): the
@@ -81,9 +86,10 @@ class PennyVectorEnv(VectorEnv):
     takes CUDA where numba-cuda finds a GPU, with numpy outputs unless outputs="torch" is asked (so code
     written for numpy keeps working). SAME_STEP's ``final_obs`` rows are numpy. docs/gpu.md.
 
-    Interrupted steps: a step interrupted by an exception (KeyboardInterrupt) may leave the
-    envs' bookkeeping half done (stepped but not marked for autoreset); the next step() then
-    raises ResetNeeded until a reset() of every env.
+    Interrupted steps and resets: a step or a reset interrupted by an exception (KeyboardInterrupt)
+    may leave the envs' bookkeeping half done (stepped but not marked for autoreset, half drawn); the
+    next step() then raises ResetNeeded until a reset() of every env. A reset whose seed or options are
+    refused changes nothing.
 
     reset options: ``reset_mask`` (num_envs,) bool, ``state`` ((6,) or (num_envs, 6)) and
     ``target`` ((2,) or (num_envs, 2)) for the envs reset (checked as PennyEnv's options).
@@ -101,13 +107,20 @@ class PennyVectorEnv(VectorEnv):
             raise TypeError(f"num_envs must be a positive integer, got {type(num_envs).__name__}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        check_int64("num_envs", num_envs)
         if isinstance(max_impacts_in_info, bool) or not isinstance(max_impacts_in_info, (int, np.integer)):
             raise TypeError(f"max_impacts_in_info must be an integer, got {type(max_impacts_in_info).__name__}")
         if max_impacts_in_info < 0:
             raise ValueError(f"max_impacts_in_info must be >= 0, got {max_impacts_in_info}")
+        check_int64("max_impacts_in_info", max_impacts_in_info)
         if max_episode_steps is not None:
             overrides["max_episode_steps"] = max_episode_steps
         self.scene, self.task = resolve(scene, task, **overrides)
+        # the envs' arrays must fit in memory (envs/limits.py): refused here rather than by a MemoryError in step()
+        per_env = vector_env_bytes(11 if self.task.kind == "impacts" else 10, int(max_impacts_in_info))
+        check_memory("num_envs", num_envs, per_env * int(num_envs),
+                     f"a PennyVectorEnv of that many envs ({per_env} B per env with max_impacts_in_info = "
+                     f"{max_impacts_in_info}; use fewer envs per process)")
         try:
             autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -178,7 +191,7 @@ class PennyVectorEnv(VectorEnv):
             core = self._core = Core(self.scene, self.task, backend=self.backend)
         self._p = env_params(core)
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
-        self._fns = env_functions(core.backend, self._m.kind)
+        self._fns = env_functions(core.backend, self._m.kind, self._m.law)
         self._consts = pack(self._p, self._m, core.k)
         # fewer envs than parallel.SERIAL_BELOW: the serial loop, called directly (parallel.locked)
         serial = getattr(self._fns["step_envs"], "serial", None)
@@ -230,16 +243,21 @@ class PennyVectorEnv(VectorEnv):
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         """Reset all envs (or those in ``options["reset_mask"]``). seed: int (env i gets seed + i),
-        a list of ints/None (one per env) or None."""
+        a list of ints/None (one per env) or None. A refused seed or option changes nothing; a reset
+        interrupted once it has begun changing the envs (Ctrl-C) makes the next step() raise ResetNeeded,
+        as an interrupted step does."""
         n = self.num_envs
         int_seed = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
         if not (seed is None or int_seed or isinstance(seed, (list, tuple, np.ndarray))):
             raise TypeError(f"seed must be an int >= 0, None or a list of {n} seeds, got {type(seed).__name__}")
+        seeds = None
         if int_seed:
             seed = check_seed(seed, "seed", n)
+            seeds = [int(seed) + i for i in range(n)]
         elif seed is not None:
-            seed = [None if s is None else check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
-        super().reset(seed=seed if int_seed else None)
+            seeds = [None if s is None else check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
+            if len(seeds) != n:
+                raise ValueError(f"seed must be an int, None or a list of {n} seeds, got {len(seeds)} seeds")
         c = self._core
         mask = self._true.copy()
         states = targets = None
@@ -254,18 +272,15 @@ class PennyVectorEnv(VectorEnv):
                 if self._S is None and not mask.all():
                     raise ResetNeeded("the first reset must reset every env")
                 if self._in_step and not mask.all():
-                    raise ResetNeeded("the previous step was interrupted: reset every env (no reset_mask)")
+                    raise ResetNeeded("the previous step or reset was interrupted: reset every env (no reset_mask)")
+        # from here on the envs change: guarded as a step is (the flag is cleared once every row is whole)
+        self._in_step = True
+        super().reset(seed=seed if int_seed else None)
         if self._keys is None:
             self._keys = seed_keys(self.np_random.integers(0, 2**63, size=n))
-        if seed is None:
+        if seeds is None:
             self._episodes[mask] += np.uint64(1) if self._S is not None else np.uint64(0)
         else:
-            if int_seed:
-                seeds = [int(seed) + i for i in range(n)]
-            else:
-                seeds = list(seed)
-                if len(seeds) != n:
-                    raise ValueError(f"seed must be an int, None or a list of {n} seeds, got {len(seeds)} seeds")
             for i, s in enumerate(seeds):  # explicit seeding only, not the step path
                 if not mask[i]:
                     continue
@@ -286,14 +301,16 @@ class PennyVectorEnv(VectorEnv):
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         rows = self._reset_envs(mask, states, targets)
         self._autoreset = np.zeros(n, dtype=bool)
-        self._in_step = False
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
         if self._gpu is not None:
-            return self._reset_gpu(rows, K)
+            out = self._reset_gpu(rows, K)
+            self._in_step = False
+            return out
         obs = np.empty((n, c.obs_dim), dtype=np.float32)  # every row: the envs outside a reset_mask keep their state
-        self._fns["observe_rows"](np.arange(n), self._state(), self._consts, obs)
+        self._fns["observe_rows"](np.arange(n), self._state(), self._consts, obs)  # (and the trig rows the step reads)
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
                           kinetic_energy(self._S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8))
+        self._in_step = False
         return obs, info
 
     def _reset_gpu(self, rows, K):
@@ -339,8 +356,8 @@ class PennyVectorEnv(VectorEnv):
         if self._S is None:
             raise ResetNeeded("PennyVectorEnv.step() called before reset()")
         if self._in_step:
-            raise ResetNeeded("PennyVectorEnv.step(): the previous step was interrupted (an exception such as "
-                              "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
+            raise ResetNeeded("PennyVectorEnv.step(): the previous step() or reset() was interrupted (an exception such "
+                              "as KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         if self._gpu is not None:
             return self._step_gpu(actions)
         n = self.num_envs
@@ -358,10 +375,11 @@ class PennyVectorEnv(VectorEnv):
         # the info's impact counts, times and ends are the buffers' (new arrays each step); the post-impact
         # states, rest flags and arc counts, which the info does not return, are reused from step to step
         if self._scratch is None:
-            self._scratch = (np.empty((n, K, 6)), np.empty((n, K), dtype=np.int8), np.empty(n, dtype=np.int64))
-        post, rest, arc_count = self._scratch
+            self._scratch = (np.empty((n, K, 6)), np.empty((n, K), dtype=np.int8), np.empty(n, dtype=np.int64),
+                             np.zeros(n, dtype=np.int8))
+        post, rest, arc_count, fault = self._scratch
         buf = (np.empty(n, dtype=np.int64), np.empty((n, K)), np.empty((n, K), dtype=np.int8), post, rest,
-               arc_count)  # (scalar.ImpactBuffers' fields; step_env clears every row)
+               arc_count, fault)  # (scalar.ImpactBuffers' fields; step_env clears every row)
         # from here to the autoreset flags the step's bookkeeping must run whole (class docstring)
         self._in_step = True
         self._step_envs(self._state(), a, skip, self._consts, (obs, rew, term, trunc, energy, limit), buf)
@@ -379,7 +397,14 @@ class PennyVectorEnv(VectorEnv):
         elif self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             self._end_episodes_same_step(info, obs, done, term)
         self._in_step = False
+        if trunc.any():
+            self._warn_faults(limit[trunc])
         return obs, rew, term, trunc, info
+
+    def _warn_faults(self, limits):
+        """A warning for the episodes that the event loop's guard ended (physics/faults.py), one per kind."""
+        for code in np.unique(limits[limits >= LIMIT_LAW_NONFINITE]):
+            warn_episode_fault(LIMIT_NAMES[code], int(code) - 2, self._core.law, self._core.table)
 
     def _step_gpu(self, actions):
         """step() on the GPU (envs/cuda_step.py): the kernel steps every env; the envs whose episode ended
@@ -419,6 +444,8 @@ class PennyVectorEnv(VectorEnv):
                 if hasattr(energy, "new_tensor") else kinetic_energy(self._S[:, reset_rows], self._p)
         term_out = out(res.terminated)
         info = self._info(out(buf.count), out(buf.time), out(buf.end), energy, term_out, out(res.limit))
+        if trunc.any():
+            self._warn_faults(res.limit.copy_to_host()[trunc])
         if next_step:
             self._autoreset = done
         elif final is not None:

@@ -8,6 +8,7 @@ import numpy as np
 
 from .scalar import NO_ARC, flow1, impact_buffers, impacts_of, overflowed, relocate1, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
+from .faults import fault_error
 from .laws import apply_law, make_law
 from .params import PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
@@ -104,6 +105,9 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     settings: SolverSettings. Work and memory are bounded: inputs beyond the documented limits
     (speeds, steering phase per interval, SolverSettings.max_impacts; docs/physics.md, Limits)
     raise a ValueError naming the field and the limit.
+    A law or a table that breaks its contract at an impact (a non-finite velocity, an energy gain, an
+    end found outside the wall: the event loop's run-time guard, physics/faults.py) raises a ValueError
+    naming the law or the table and the bound to fix.
     sensitivities: also return jacobian (d final_state / d state, 6 x 6) and, with controls,
     control_jacobian (6 x 2K), exact through every impact; jacobian_valid False (NaN matrices,
     jacobian_reason says why) where no derivative exists (physics/sensitivity.py).
@@ -189,6 +193,8 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         if overflowed(buf)[0]:  # more impacts than the buffer holds: the same pure call with room for all
             buf = impact_buffers(1, int(buf.count[0]))
             s1, elapsed = drive(buf)
+        if buf.fault[0]:  # the event loop's guard stopped at an impact: a law or table that breaks its contract
+            raise fault_error(buf.fault[0], law, table, s1, params.R, f"t = {t0 + elapsed:.6g} s")
         state = s1
         impacts, rest_events = impacts_of(buf, 0)
         for ti, end, post in impacts:
