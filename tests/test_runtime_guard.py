@@ -101,9 +101,12 @@ def test_the_vector_env_ends_those_episodes_only(sneaky_law, backend):
             obs, reward, term, trunc, info = env.step(np.zeros((3, 2)))
             if trunc.any():
                 break
+        assert not caught  # (reported as those envs reset: the next step here, NEXT_STEP autoreset)
+        states = env.states
+        env.step(np.zeros((3, 2)))
     assert list(trunc) == [True, True, False] and list(info["limit"]) == [functional.LIMIT_LAW_NONFINITE,
                                                                          functional.LIMIT_LAW_ENERGY, 0]
-    assert np.all(np.isfinite(obs)) and np.all(np.isfinite(reward)) and np.all(np.isfinite(env.states))
+    assert np.all(np.isfinite(obs)) and np.all(np.isfinite(reward)) and np.all(np.isfinite(states))
     messages = [str(w.message) for w in caught]
     assert any("'law_nonfinite'" in m for m in messages) and any("'law_energy'" in m for m in messages)
     # the single env's episode, bitwise (the same step function)
@@ -148,6 +151,24 @@ def test_false_bounds_are_named_when_an_end_is_found_outside_the_wall():
     k, (obs, _, _, trunc, info), caught = _episode(env, RIPPLE_START)
     assert trunc and info["limit"] == functional.LIMIT_OUTSIDE_WALL and np.all(np.isfinite(obs))
     assert any("'outside_wall'" in m and "table ripple" in m for m in caught)
+
+
+@pytest.mark.parametrize("mode", ["SAME_STEP", "DISABLED"])
+def test_the_vector_env_reports_faults_in_every_autoreset_mode(sneaky_law, mode):
+    from gymnasium.vector import AutoresetMode
+    env = pe.PennyVectorEnv(2, "ellipse", "reach", law=sneaky_law, backend="python",
+                            autoreset_mode=getattr(AutoresetMode, mode))
+    env.reset(seed=0, options={"state": np.array([S_NAN, [0.0, 0.0, 0.0, 1.0, 0.5, 0.1]]), "target": TARGET})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(100):
+            trunc = env.step(np.zeros((2, 2)))[3]
+            if trunc.any():
+                break
+        if mode == "DISABLED":
+            assert not caught
+            env.reset(options={"reset_mask": trunc})
+    assert [str(w.message).count("'law_nonfinite'") for w in caught] == [1]
 
 
 def test_the_guard_is_silent_on_sound_laws_and_tables():
