@@ -62,6 +62,19 @@ def test_the_batch_raises_naming_the_law_and_the_penny(sneaky_law, backend, star
         pb.simulate(np.array([fine, start]), table=pe.Ellipse(0.15, 0.2), law=sneaky_law, t_final=1.0, backend=backend)
 
 
+def test_impact_map_applies_the_guard_too(sneaky_law):
+    # the batch API's and simulate's impact_map apply the law outside the event loop
+    table = pe.Ellipse(0.15, 0.2)
+    on_wall = [0.15 - 0.01, 0.0, 0.0, 0.0, 20.0, 0.0]  # front end on the wall, moving outward at theta_dot = 20
+    with pytest.raises(ValueError, match="state: law 'sneaky' returned a non-finite velocity"):
+        pe.impact_map(on_wall, table=table, end=1, law=sneaky_law)
+    pumped = [-0.15 + 0.01, 0.0, 0.0, 0.0, -20.0, 0.0]  # back end, theta_dot = -20
+    with pytest.raises(ValueError, match=r"states\[1\]: law 'sneaky' added kinetic energy"):
+        pb.impact_map(np.array([[0.14, 0.0, 0.0, 0.0, 5.0, 0.0], pumped]), [1, -1], table=table, law=sneaky_law)
+    fine = pe.impact_map([0.14, 0.0, 0.0, 0.0, 5.0, 0.3], table=table, end=1, law=sneaky_law)
+    assert np.all(np.isfinite(fine))
+
+
 def _episode(env, start):
     env.reset(seed=0, options={"state": start, "target": TARGET})
     with warnings.catch_warnings(record=True) as caught:

@@ -90,6 +90,29 @@ def check_faults(buf, law=None, table=None, states=None, R=None, t0=0.0, elapsed
     raise fault_error(int(fault[i]), law, table, state, R, f"penny {i}{when}")
 
 
+def check_mapped(S, post, sigma, params, table, law, name: str = "states") -> None:
+    """The run-time guard's law checks for impact_map (which applies the law outside the event loop): a non-finite
+    velocity, or an energy gain beyond ENERGY_RTOL where the end moves outward (as the event loop applies a law),
+    is a ValueError naming the law and the row. S, post: (6, N) states before and after; sigma: the ends."""
+    import numpy as np
+
+    from .laws import normal_form
+    bad = ~(np.isfinite(post[4]) & np.isfinite(post[5]))
+    code = FAULT_NONFINITE
+    if not bad.any():
+        a, b, _ = normal_form(S, sigma, params, table)
+        outward = np.broadcast_to(a * S[4] + b * S[5] > 0.0, bad.shape)
+        Itot, J = params.rolling_inertia, params.J
+        before = Itot * (S[4] * S[4]) + J * (S[5] * S[5])
+        after = Itot * (post[4] * post[4]) + J * (post[5] * post[5])
+        bad = outward & (after > before * (1.0 + ENERGY_RTOL))
+        code = FAULT_ENERGY
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        where = name if S.shape[1] == 1 else f"{name}[{i}]"
+        raise ValueError(f"{where}: " + describe(code, law))
+
+
 def warn_episode_fault(limit_name: str, code, law=None, table=None) -> None:
     """A warning that an episode ended on a fault (the env's info["limit"] also says so)."""
     import warnings

@@ -8,7 +8,7 @@ import numpy as np
 
 from .scalar import NO_ARC, flow1, impact_buffers, impacts_of, overflowed, relocate1, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
-from .faults import fault_error
+from .faults import check_mapped, fault_error
 from .laws import apply_law, make_law
 from .params import PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
@@ -262,7 +262,8 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     The law's formula is applied as a map on the impact surface whatever the sign of the
     normal velocity (the simulator only calls it for ends moving outward). For the plastic law
     an end left moving outward (possible when I > m R^2 or J > m R^2, see laws.py) gets its
-    normal velocity removed."""
+    normal velocity removed. A law that returns a non-finite velocity, or adds kinetic energy where the end
+    moves outward, raises a ValueError naming it (physics/faults.py)."""
     params = check_params(params)
     if table is None:
         raise ValueError("table is required for impact_map")
@@ -279,4 +280,6 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     if abs(g) > 1e-8 * table.size:
         label = "front" if end == 1 else "back"
         raise ValueError(f"state: the {label} end is not on the wall (h = {g:.3g})")
-    return apply_law(S, float(end), params, table, law)[:, 0]
+    post = apply_law(S, float(end), params, table, law)
+    check_mapped(S, post, float(end), params, table, law, "state")  # (the guard of the event loop, for the map)
+    return post[:, 0]
