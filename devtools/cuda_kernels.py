@@ -48,7 +48,8 @@ def example_arguments(n: int = 4, K: int = 2, task="impacts"):
     d = core.obs_dim
     out = StepResults(z((n, d), np.float32), z(n), z(n, bool), z(n, bool), z(n), z(n, np.int8), z(n), z(n), z(n, i),
                       z((0, d), np.float32), z(n, bool))
-    env_buf = ImpactBuffers(z(n, i), z((K, n)), z((K, n), np.int8), z((0, 6, n)), z((0, n), np.int8), z(n, i))
+    env_buf = ImpactBuffers(z(n, i), z((K, n)), z((K, n), np.int8), z((0, 6, n)), z((0, n), np.int8), z(n, i),
+                            z(n, np.int8))
     buf = impact_buffers(n, K)
     rows = z(n, i)
     work = (z(n, i), z(2, i), 0)

@@ -21,6 +21,7 @@ import numpy as np
 from .physics import SolverSettings, make_law, make_table  # noqa: F401 (make_table re-exported)
 from .physics import advance_pennies, apply_law, end_kinematics, first_impacts
 from .physics import flow as _flow
+from .physics.faults import check_mapped
 from .physics.simulation import FREE_INTERVAL, MAX_INTERVALS, interval_grid
 from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
                                  positive_time, real_array)
@@ -98,7 +99,9 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
 
 
 def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray:
-    """(N, 6) post-impact states for states whose end ends[i] (+1 front, -1 back) is on the wall."""
+    """(N, 6) post-impact states for states whose end ends[i] (+1 front, -1 back) is on the wall. A law that
+    returns a non-finite velocity, or adds kinetic energy where the end moves outward, raises a ValueError
+    naming it and the row."""
     params = check_params(params)
     if table is None:
         raise ValueError("table: impact_map needs a table")
@@ -121,7 +124,9 @@ def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray
     if off.any():
         k = int(np.flatnonzero(off)[0])
         raise ValueError(f"states[{k}]: the {'front' if e[k] > 0 else 'back'} end is not on the wall (h = {g[k]:.3g})")
-    return apply_law(S, e, params, tab, law).T.copy()
+    post = apply_law(S, e, params, tab, law)
+    check_mapped(S, post, e, params, tab, law)  # (the event loop's guard, for the map: physics/faults.py)
+    return post.T.copy()
 
 
 @dataclass
@@ -187,7 +192,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     (physics/compiled.py), "cuda" the same functions on a GPU, one thread per penny (numpy in and out,
     copied each interval; docs/gpu.md), "python" the same loop in plain Python (slow: for debugging and tests);
     "auto" (default) takes numba where it is installed and the table compiles (with a one-time
-    warning otherwise). Both give bitwise the same results (tests/test_compiled.py)."""
+    warning otherwise). Both give bitwise the same results (tests/test_compiled.py). A law or a table that
+    breaks its contract at an impact raises a ValueError naming it and the penny (physics/faults.py)."""
     params = check_params(params)
     tab = _table(table, params)
     law = make_law(law)

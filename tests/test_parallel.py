@@ -163,3 +163,86 @@ def test_the_parallel_loops_equal_the_serial_ones_on_a_walled_table():
     part = pb.simulate(S[:8], table={"kind": "circle", "r": 0.12}, law="elastic", t_final=2.0)
     assert np.array_equal(whole.final_states[:8], part.final_states) and whole.impact_counts[:8].sum() >= 16
     assert np.array_equal(whole.impact_counts[:8], part.impact_counts)
+
+
+FORK_WHILE_STEPPING = """
+    import os, threading, time
+    import numpy as np
+    import numba
+    import penny_env
+    from penny_env.physics import parallel
+    from penny_env.physics.parallel import SERIAL_BELOW
+    N = 2 * SERIAL_BELOW  # the parallel loop
+    v = penny_env.PennyVectorEnv(N)
+    v.reset(seed=0)
+    v.step(np.zeros((N, 2)))
+    print("layer", numba.threading_layer())
+
+    def fork_and_use():
+        # the child builds and steps vector envs at once (a small one, and one big enough for the parallel loop);
+        # exit 0 when it ran serially, "blocked" when it had not finished after 60 s
+        pid = os.fork()
+        if pid == 0:
+            try:
+                for n in (4, SERIAL_BELOW):
+                    w = penny_env.PennyVectorEnv(n)
+                    w.reset(seed=1)
+                    w.step(np.zeros((n, 2)))
+                os._exit(0 if parallel.serial_now() else 3)
+            except BaseException:
+                os._exit(2)
+        deadline = time.time() + 60
+        while True:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                return os.waitstatus_to_exitcode(status)
+            if time.time() > deadline:
+                os.kill(pid, 9)
+                os.waitpid(pid, 0)
+                return "blocked"
+            time.sleep(0.05)
+
+    # 1. deterministic: a thread holds the parallel lock at the fork (as a thread inside a parallel step does)
+    held, release = threading.Event(), threading.Event()
+
+    def hold():
+        with parallel.PARALLEL_LOCK:
+            held.set()
+            release.wait()
+    t = threading.Thread(target=hold, daemon=True)
+    t.start()
+    held.wait()
+    print("held lock child", fork_and_use())
+    release.set()
+    t.join()
+
+    # 2. the trial's case: a background thread steps the vector env in a loop while the main thread forks
+    stop, steps = threading.Event(), [0]
+
+    def run():
+        while not stop.is_set():
+            v.step(np.zeros((N, 2)))
+            steps[0] += 1
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    while steps[0] < 2:
+        time.sleep(0.01)
+    print("stepping children", [fork_and_use() for _ in range(3)])
+    stop.set()
+    t.join()
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork() on this platform")
+@pytest.mark.parametrize("layer", [None, "omp", "workqueue", "tbb"])
+def test_a_child_forked_while_another_thread_steps_uses_penny_env_at_once(layer):
+    # repro_fork_lock (issue 31): under workqueue and TBB a child forked while a background thread ran
+    # PennyVectorEnv.step blocked for more than 20 s in 2 of 3 tries: it inherited PARALLEL_LOCK held by a thread
+    # it does not have. The child now gets a fresh lock and runs serially on every layer (physics/parallel.py).
+    code, out = run_script(FORK_WHILE_STEPPING, **({"NUMBA_THREADING_LAYER": layer} if layer else {}))
+    if layer and code != 0 and ("No threading layer could be loaded" in out or "libtbb" in out
+                                or "threading layer" in out and "not" in out.lower()):
+        pytest.skip(f"numba's {layer} layer does not load here (TBB needs libtbb, the tbb package)")
+    assert code == 0 and "held lock child 0" in out and "stepping children [0, 0, 0]" in out, out
+    if layer:
+        assert f"layer {layer}" in out, out

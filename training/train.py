@@ -36,15 +36,16 @@ FIELDS = {"env_id", "algo", "num_envs", "total_timesteps", "seed", "eval_episode
 
 def load_config(path, overrides=()):
     """Read and check a training config; unknown or invalid fields raise ValueError naming them."""
+    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
     try:
-        cfg = yaml.safe_load(Path(path).read_text())
+        cfg = yaml_load(Path(path).read_text())
     except yaml.YAMLError as exc:
         raise ValueError(f"{path}: invalid YAML: {exc}") from None
     if not isinstance(cfg, dict):
         raise ValueError(f"{path}: a training config must be a mapping of fields")
     for item in overrides:
         key, _, value = item.partition("=")
-        cfg[key] = yaml.safe_load(value)
+        cfg[key] = yaml_load(value)
     unknown = set(cfg) - FIELDS
     if unknown:
         raise ValueError(f"{path}: unknown field(s) {sorted(unknown)}; known: {sorted(FIELDS)}")

@@ -160,6 +160,7 @@ def parse_overrides(items) -> dict:
     """{field: value} from 'field=value' strings (values read as YAML); table=NAME means scene=NAME."""
     import yaml
     from penny_env.envs.scene import CONFIG_DIR
+    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
 
     out = {}
     for item in items:
@@ -167,7 +168,7 @@ def parse_overrides(items) -> dict:
             raise ValueError(f"override {item!r} must be field=value")
         key, raw = item.split("=", 1)
         try:
-            value = yaml.safe_load(raw)
+            value = yaml_load(raw)
         except yaml.YAMLError as exc:
             raise ValueError(f"override {key}: cannot read {raw!r}: {exc}") from None
         if key == "table" and isinstance(value, str):

@@ -44,10 +44,11 @@ class BatchEntryPoints(NamedTuple):
     laws: list
 
 
-def batch_entry_points(target: str, kind: int) -> BatchEntryPoints:
-    """The batch loops for ``target`` and table kind ``kind`` (Model.kind; the python target runs any)."""
+def batch_entry_points(target: str, kind: int, law: int = -1) -> BatchEntryPoints:
+    """The batch loops for ``target``, table kind ``kind`` (Model.kind; the python target runs any) and law
+    ``law`` (Model.law: the build holds the built-in laws and that one)."""
     from .physics import physics_build
-    b = physics_build(target, kind)
+    b = physics_build(target, kind, law=law)
     return BatchEntryPoints(b.target, b.functions["advance_batch"], b.functions["first_impact_batch"], b.functions,
                             b.laws)
 

@@ -117,7 +117,7 @@ class DeviceStep:
                           alloc(n, np.int8), alloc(n), alloc(n), alloc(n, np.int64),
                           alloc((n if self.same_step else 0, d), np.float32), alloc(n, np.bool_))
         buf = ImpactBuffers(self._upload(np.full(n, K, dtype=np.int64), output=True), alloc((K, n)), alloc((K, n), np.int8),
-                            alloc((0, 6, n)), alloc((0, n), np.int8), alloc(n, np.int64))
+                            alloc((0, 6, n)), alloc((0, n), np.int8), alloc(n, np.int64), alloc(n, np.int8))
         return out, buf
 
     def _view(self, a):

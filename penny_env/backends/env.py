@@ -20,7 +20,7 @@ from ..envs.functional import (NEXT_STEP, SAME_STEP, EnvState, PennyState, StepR
                                conclude, distance, env_row, env_step, initial_state, limit_of, observe_row, observe_rows,
                                reset_row, reset_rows, same_step_reset, step_env, step_envs, write_observation,
                                write_outputs, write_state)
-from ..physics.scalar import ImpactBuffers
+from ..physics.scalar import FAULT_NONE, ImpactBuffers
 from . import cache, generated, packing
 from .builder import Builder, check_target
 from .physics import build_variant, check_kind, physics_build, physics_modules, variant_key
@@ -160,7 +160,8 @@ def fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot):
             acc1, acc2, ctrl = actuate(a0, a1, p)
             if p.plane or certified_free_trig(st_i.s, st_i.trig[2], st_i.trig[3], acc1, acc2, p.dt, m):  # noqa: F821
                 s1 = flow1(st_i.s, acc1, acc2, p.dt, m.R)  # noqa: F821
-                new, r, te, tu, e, lim = conclude(st_i, s1, p.dt, limit_of(s1, p.dt, p), ctrl, 0, p, k, obs, i)
+                new, r, te, tu, e, lim = conclude(st_i, s1, p.dt, limit_of(s1, p.dt, FAULT_NONE, p), ctrl, 0, p, k,
+                                                  obs, i)
                 write_state(st, i, new)
                 write_outputs(out, i, new, r, te, tu, e, lim)
                 done = te or tu
@@ -221,20 +222,23 @@ def env_modules(record) -> tuple:
 
 
 def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool = False,
-                     max_registers=None) -> EnvEntryPoints:
+                     max_registers=None, law: int = -1) -> EnvEntryPoints:
     """The entry points of the env step for ``target`` ("python", "cpu", "cuda"), table kind ``kind`` (the
     Model.kind of the constants they will receive: the compiled physics calls that table's formulas whatever
     Model.kind says; the python target runs any), the task ``record`` (envs/tasks/) and its constants' type.
     Built once per process and key; fresh: build anew, keep nothing (the PTX tests). max_registers: CUDA's
-    per-thread register cap of the fast step kernel (None: the compiler's choice)."""
+    per-thread register cap of the fast step kernel (None: the compiler's choice). law: the Model.law of the
+    constants (a user's law is compiled only into the builds that run it: physics.build_laws)."""
     target = check_target(target)
-    kind = -1 if target == "python" else check_kind(kind)
-    key = (target, variant_key(kind), record, constants_type, max_registers)
+    if target == "python":
+        kind, law = -1, -1
+    kind = check_kind(kind)
+    key = (target, variant_key(kind, law), record, constants_type, max_registers)
     if key in _ENTRY and not fresh:
         return _ENTRY[key]
     from ..envs.functional import EnvParams
     from ..physics.scalar import Model
-    phys = physics_build(target, kind, fresh)  # (also picks the threading layer: backends/threads.py)
+    phys = physics_build(target, kind, fresh, law)  # (also picks the threading layer: backends/threads.py)
     stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
     own = phys.cache and cache.cacheable(stages)
     modules = env_modules(record) if target != "python" else ()

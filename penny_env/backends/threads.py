@@ -20,9 +20,12 @@ What penny_env does (docs/contention.md measures the alternatives side by side):
   few per cent on a quiet machine and keeps the step from collapsing beside a busy process;
 * :data:`PARALLEL_LOCK` serialises penny_env's parallel calls from several Python threads, so workqueue's
   unsafe case never happens (a parallel call already uses every core, so taking turns loses nothing);
-* a child forked after the parent launched OpenMP's threads runs penny_env's loops serially (the same
-  functions compiled without ``parallel``, bitwise the same results; :func:`locked`), since GNU OpenMP
-  cannot run there. Forked workers usually step one env each, so they lose little;
+* a child forked after the parent launched numba's threads, on any layer, runs penny_env's loops serially
+  (the same functions compiled without ``parallel``, bitwise the same results; :func:`locked`): GNU
+  OpenMP cannot run there, and a child forked while another thread was inside a parallel step under
+  workqueue or TBB blocked for more than 20 s in 2 of 3 tries (issue 31). The child also gets a fresh
+  :data:`PARALLEL_LOCK` (:func:`_after_fork_in_child`): the parent's may be held, at the fork, by a thread
+  the child does not have. Forked workers usually step one env each, so they lose little;
 * so do calls with fewer than :data:`SERIAL_BELOW` pennies, where waking the sleeping threads would cost
   more than the work.
 
@@ -39,7 +42,17 @@ WAIT_POLICY = "passive"
 # about 65 us per call on 2 cores (make_vec PennyReach-Ellipse-v0: 1.5 M env-steps/s at N = 256 against
 # 2.6 M with spinning threads), about what one core needs for 150 pennies' steps
 SERIAL_BELOW = 512
-_FORKED_AFTER_OPENMP = False  # this process is a fork() child of one whose OpenMP threads were running
+_FORKED_AFTER_OPENMP = False  # this process is a fork() child of one whose numba threads (OpenMP, workqueue
+# or TBB) were launched: its loops run serially (the name is older than the other layers' case)
+
+
+def threads_launched() -> bool:
+    """numba's parallel threads are launched in this process, on whatever threading layer."""
+    try:
+        from numba.np.ufunc import parallel
+    except ImportError:
+        return False
+    return bool(getattr(parallel, "_is_initialized", False))
 
 
 def openmp_running() -> bool:
@@ -55,9 +68,12 @@ def openmp_running() -> bool:
 
 
 def _after_fork_in_child() -> None:
-    global _FORKED_AFTER_OPENMP
+    """In a fork() child: a new, free PARALLEL_LOCK (the parent's may be held by a thread that the child does not
+    have, forever), and serial loops if numba's threads were launched (the child has none of them)."""
+    global _FORKED_AFTER_OPENMP, PARALLEL_LOCK
+    PARALLEL_LOCK = threading.RLock()
     try:
-        _FORKED_AFTER_OPENMP = _FORKED_AFTER_OPENMP or openmp_running()
+        _FORKED_AFTER_OPENMP = _FORKED_AFTER_OPENMP or threads_launched()
     except Exception:  # noqa: BLE001 (never break a fork over this)
         _FORKED_AFTER_OPENMP = True
 
@@ -74,14 +90,15 @@ def configure() -> None:
 
 
 def serial_now() -> bool:
-    """Run penny_env's loops serially: this is a child forked after OpenMP ran (see the module docstring)."""
+    """Run penny_env's loops serially: this is a child forked after numba's threads were launched (see the
+    module docstring)."""
     return _FORKED_AFTER_OPENMP
 
 
 def locked(f, serial=None, count=None):
     """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads);
     count(args) gives the pennies of a call (default: the first argument's last axis). ``serial()`` (the same function compiled without
-    ``parallel``, built on first use) runs instead in a child forked after OpenMP ran, and for fewer than
+    ``parallel``, built on first use) runs instead in a child forked after numba's threads were launched, and for fewer than
     :data:`SERIAL_BELOW` pennies, where waking the sleeping threads costs more than the work they share."""
     built = []
     count = count or (lambda args: args[0].shape[-1])

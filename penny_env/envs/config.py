@@ -26,7 +26,14 @@ def number(owner: str, name: str, value, *, positive=False, nonneg=False, lo=Non
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         import numpy as np
         if not isinstance(value, (np.integer, np.floating)) or isinstance(value, np.bool_):
-            raise ConfigTypeError(f"{owner}.{name} must be a number, got {value!r}")
+            hint = ""
+            if isinstance(value, str):
+                try:
+                    float(value)
+                    hint = " (a string: write the number unquoted, e.g. 0.01 or 1.0e-2)"
+                except ValueError:
+                    pass
+            raise ConfigTypeError(f"{owner}.{name} must be a number, got {value!r}{hint}")
     value = float(value)
     if not math.isfinite(value):
         raise ConfigError(f"{owner}.{name} must be finite, got {value!r}")

@@ -105,7 +105,7 @@ class Core:
         if target is None:
             target = "cpu" if self.backend == "numba" else "python"
         m = scalar_model(self.params, self.table, self.law, self.settings)
-        return env_entry_points(target, m.kind, self.task_record, type(self.k), **options)
+        return env_entry_points(target, m.kind, self.task_record, type(self.k), law=m.law, **options)
 
     def draw_episodes(self, keys, episodes):
         """(S (6, N), target (2, N), arc (2, N)): the initial states, targets and marked arcs' directions of

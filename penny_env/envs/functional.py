@@ -35,15 +35,18 @@ from typing import NamedTuple
 import numpy as np
 
 from ..physics.kernels import SCALAR
-from ..physics.scalar import NO_ARC, Model, clear_row, run_interval
+from ..physics.scalar import FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, NO_ARC, Model, clear_row, run_interval
 from .draws import draw_stream, draw_uniform
 
 XP = SCALAR      # the math namespace (numba_math or cuda_math in the compiled copies)
 prange = range   # numba.prange in the CPU copies; one thread per env on CUDA
 
-# info["limit"]: which documented limit ended an episode (truncated), docs/envs.md#limits
-LIMIT_NONE, LIMIT_SPEED, LIMIT_IMPACTS, LIMIT_ACTION = 0, 1, 2, 3
-LIMIT_NAMES = ("", "speed", "impacts", "action")
+# info["limit"]: which documented limit ended an episode (truncated), docs/envs.md#limits. 3 to 5: the event
+# loop's run-time guard stopped the step at an impact (scalar.FAULT_* + 2, physics/faults.py); 6: a non-finite
+# action met on the device (the host refuses it before the step otherwise)
+LIMIT_NONE, LIMIT_SPEED, LIMIT_IMPACTS = 0, 1, 2
+LIMIT_LAW_NONFINITE, LIMIT_LAW_ENERGY, LIMIT_OUTSIDE_WALL, LIMIT_ACTION = 3, 4, 5, 6
+LIMIT_NAMES = ("", "speed", "impacts", "law_nonfinite", "law_energy", "outside_wall", "action")
 # the vector env's autoreset (gymnasium.vector.AutoresetMode), as EnvParams.autoreset
 NEXT_STEP, SAME_STEP, DISABLED = 0, 1, 2
 
@@ -229,16 +232,27 @@ def transition(st, acc1, acc2, p, m, k, buf, row):
     elapsed, limit) (:func:`limit_of`). The motion is never altered."""
     s1, elapsed = run_interval(st.s, st.trig[2], st.trig[3], acc1, acc2, p.dt, m, p.plane, False, 0, buf, row,
                                task_marked_arc(k, st))  # noqa: F821
-    return s1, elapsed, limit_of(s1, elapsed, p)
+    # (the guard's fault is read only where the period stopped early: off the hot path of impact-free steps)
+    fault = buf.fault[row] if elapsed < p.dt else FAULT_NONE
+    return s1, elapsed, limit_of(s1, elapsed, fault, p)
 
 
-def limit_of(s1, elapsed, p):
+def limit_of(s1, elapsed, fault, p):
     """The documented limit a period reached: LIMIT_IMPACTS when it needed more than the event cap's impacts
-    (the state is then the one at elapsed < dt), LIMIT_SPEED when |theta_dot| > W_max or |phi_dot| > w_max
-    (a further step could pass MAX_ANGULAR_SPEED), else LIMIT_NONE."""
+    (the state is then the one at elapsed < dt), LIMIT_LAW_NONFINITE, LIMIT_LAW_ENERGY or LIMIT_OUTSIDE_WALL
+    where the event loop's run-time guard stopped it at an impact (``fault``: a law or a table breaking its
+    contract, physics/faults.py; the state is the one of that impact, finite), LIMIT_SPEED when |theta_dot| >
+    W_max or |phi_dot| > w_max (a further step could pass MAX_ANGULAR_SPEED), else LIMIT_NONE."""
     limit = LIMIT_NONE
     if elapsed < p.dt:
-        limit = LIMIT_IMPACTS
+        if fault == FAULT_NONE:
+            limit = LIMIT_IMPACTS
+        elif fault == FAULT_NONFINITE:
+            limit = LIMIT_LAW_NONFINITE
+        elif fault == FAULT_ENERGY:
+            limit = LIMIT_LAW_ENERGY
+        else:
+            limit = LIMIT_OUTSIDE_WALL
     elif abs(s1[4]) > p.W_max or abs(s1[5]) > p.w_max:
         limit = LIMIT_SPEED
     return limit

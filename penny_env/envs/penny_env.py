@@ -13,7 +13,9 @@ from ..backends.cache import announce_compile
 from ..backends.packing import pack
 from ..physics.scalar import impact_buffers, scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys
-from .functional import env_params, kinetic_energy
+from ..physics.faults import warn_episode_fault
+from .functional import LIMIT_LAW_NONFINITE, LIMIT_NAMES, env_params, kinetic_energy
+from .limits import check_int64, check_memory, single_env_bytes
 from .scene import resolve
 
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
@@ -129,7 +131,12 @@ class PennyEnv(gym.Env):
                         (|theta_dot| or |phi_dot| past Scene.step_speed_limits(): one more step
                         could pass MAX_ANGULAR_SPEED), 2 "impacts" (the step needed more than
                         SolverSettings.max_events_per_interval impacts: the state and ``time`` are
-                        those right after the last one, inside the period); names in
+                        those right after the last one, inside the period); 3 "law_nonfinite",
+                        4 "law_energy" (the impact law returned a non-finite velocity or added
+                        kinetic energy at an impact), 5 "outside_wall" (an end was found outside the
+                        wall: the table's bounds are false): the event loop's run-time guard
+                        stopped the step at that impact, with a RuntimeWarning naming the law or
+                        the table (docs/envs.md#limits); names in
                         ``penny_env.envs.functional.LIMIT_NAMES``
     ==================  ==========================================================================
 
@@ -137,8 +144,9 @@ class PennyEnv(gym.Env):
     speeds are checked at construction, and the limits above end the episode before a step could
     need more (docs/envs.md#limits). The motion is never altered.
 
-    **Interrupted steps.** A step interrupted by an exception (KeyboardInterrupt) may leave its
-    bookkeeping half done; the next step() then raises ResetNeeded until reset() is called.
+    **Interrupted steps and resets.** A step or a reset interrupted by an exception (KeyboardInterrupt)
+    may leave its bookkeeping half done; the next step() then raises ResetNeeded until reset() is called.
+    A reset whose seed or options are refused changes nothing.
 
     ``reset`` returns the same keys (no impacts, ``is_success`` False). ``max_impacts_in_info``
     (default 8) sets the width of the impact arrays; a larger one keeps more of a step's impacts.
@@ -158,6 +166,9 @@ class PennyEnv(gym.Env):
             raise TypeError(f"max_impacts_in_info must be an integer, got {type(max_impacts_in_info).__name__}")
         if max_impacts_in_info < 0:
             raise ValueError(f"max_impacts_in_info must be >= 0, got {max_impacts_in_info}")
+        check_int64("max_impacts_in_info", max_impacts_in_info)
+        check_memory("max_impacts_in_info", max_impacts_in_info, single_env_bytes(int(max_impacts_in_info)),
+                     "PennyEnv's impact buffers")
         self.max_impacts_in_info = int(max_impacts_in_info)
         self.backend = backend
         self.truncate = truncate
@@ -218,37 +229,40 @@ class PennyEnv(gym.Env):
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
+        # The seed and the options are checked first: a bad one raises and changes nothing. The new episode is
+        # then drawn into locals and stored; from the first change on, _in_step is set, so that a reset
+        # interrupted there (Ctrl-C) makes the next step() raise ResetNeeded, as an interrupted step does.
         if seed is not None:
             seed = check_seed(seed)
-        super().reset(seed=seed)
         core = self._core
-        if seed is not None:
-            self._key = seed_keys([seed])[0]
-            self._episode = 0
-        elif self._key is None:
-            self._key = seed_keys([int(self.np_random.integers(0, 2**63))])[0]
-            self._episode = 0
-        else:
-            self._episode += 1
         state = tgt = None
         if options is not None:
-            state, tgt = core.check_options(options, 1)  # (checked before anything changes)
+            state, tgt = core.check_options(options, 1)
+        self._in_step = True
+        super().reset(seed=seed)
+        if seed is not None:
+            key, episode = seed_keys([seed])[0], 0
+        elif self._key is None:
+            key, episode = seed_keys([int(self.np_random.integers(0, 2**63))])[0], 0
+        else:
+            key, episode = self._key, self._episode + 1
         obs = np.empty((1, core.obs_dim), dtype=np.float32)
-        s, trig, target, arc, d = self._fns.initial_state(self._key, self._episode, self._consts, obs)
+        s, trig, target, arc, d = self._fns.initial_state(key, episode, self._consts, obs)
         if state is not None or tgt is not None:
             s = tuple(state[0].tolist()) if state is not None else s
             target = (float(tgt[0, 0]), float(tgt[0, 1])) if tgt is not None else target
             trig, d = self._fns.observe_state((s, trig, target, arc, 0, d, 0, 0.0), self._consts, obs)
+        self._key, self._episode = key, episode
         self._s, self._trig, self._target, self._arc, self._d = s, trig, target, arc, d
         self._steps = 0
         self._count = 0
         self._t = 0.0
-        self._done = False
-        self._in_step = False
         self._trail.clear()
         self._trail.append((s[0], s[1]))
         self._hud = {"time": 0.0, "impact_count": 0, "impacts": deque(maxlen=32)}
+        self._done = False
         info = self._info(0, (), (), kinetic_energy(self._s, self._p), False)
+        self._in_step = False  # (last: the episode is whole and its first observation and info made)
         if self.render_mode == "human":
             self.render()
         return obs[0], info
@@ -259,7 +273,7 @@ class PennyEnv(gym.Env):
         if self._done:
             raise ResetNeeded("PennyEnv.step() called after the episode ended; call reset()")
         if self._in_step:
-            raise ResetNeeded("PennyEnv.step(): the previous step was interrupted (an exception such as "
+            raise ResetNeeded("PennyEnv.step(): the previous step() or reset() was interrupted (an exception such as "
                               "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         c = self._core
         a = _action_list(action, c.n_act)
@@ -293,6 +307,8 @@ class PennyEnv(gym.Env):
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
+        if limit >= LIMIT_LAW_NONFINITE:  # the event loop's guard stopped the step (physics/faults.py)
+            warn_episode_fault(LIMIT_NAMES[limit], limit - 2, c.law, c.table)
         return obs[0], float(reward), terminated, truncated, info
 
     def _info(self, n_imp, times, ends, energy, success, limit=0):

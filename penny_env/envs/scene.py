@@ -151,12 +151,23 @@ class Scene:
             raise ConfigError(f"{o}.{exc}") from None
         # the initial speeds: one step at the torque limits from any of them stays within the limits
         W_max, w_max = self.step_speed_limits()
-        for name, bound in (("theta_dot", W_max), ("phi_dot", w_max)):
+        for name, bound, torque in (("theta_dot", W_max, "u2"), ("phi_dot", w_max, "u1")):
             worst = max(abs(v) for v in out[name])
             if worst > bound:
-                raise ConfigError(f"{o}.init.{name} = {out[name]!r} rad/s: |{name}| must be <= {bound:.6g} rad/s, so that "
-                                  f"a step at the torque limits stays within MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} "
-                                  f"rad/s (and MAX_STEERED_PHASE; docs/physics.md#limits)")
+                room = max(bound, 0.0)
+                where = (f"a step at torque_limits.{torque} = {self.torque_limits[torque]!r} N m over control_dt = "
+                         f"{self.control_dt!r} s stays within MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s (and "
+                         "MAX_STEERED_PHASE; docs/physics.md#limits)")
+                if out[name] == list(_range(o, name, INIT_DEFAULTS[name])):
+                    # the range is the default one: the torque limit (or control_dt) the user set leaves no room for it
+                    raise ConfigError(f"{o}.torque_limits.{torque} = {self.torque_limits[torque]!r} N m with control_dt = "
+                                      f"{self.control_dt!r} s leaves room for |{name}| <= {room:.6g} rad/s only (from a "
+                                      f"faster start, one step at that torque could pass MAX_ANGULAR_SPEED = "
+                                      f"{MAX_ANGULAR_SPEED:g} rad/s or MAX_STEERED_PHASE; docs/physics.md#limits), less than "
+                                      f"the default init.{name} = {out[name]!r} rad/s: lower torque_limits.{torque} or "
+                                      f"control_dt (or narrow init.{name})")
+                raise ConfigError(f"{o}.init.{name} = {out[name]!r} rad/s: |{name}| must be <= {room:.6g} rad/s, so that "
+                                  f"{where}")
         lo_len, hi_len = LENGTH_RANGE
         if not lo_len <= self.arena <= hi_len:  # beyond it the squared distances of the reward overflow
             raise ConfigError(f"{o}.arena must be within [{lo_len:g}, {hi_len:g}] m, got {self.arena!r}")
@@ -215,9 +226,11 @@ _MERGED = {"params", "torque_limits", "init", "obs_scale"}
 
 def _yaml_load(path: Path) -> dict:
     import yaml
+
+    from .yaml_io import safe_load
     try:
         with open(path) as f:
-            data = yaml.safe_load(f)
+            data = safe_load(f)  # (1e-2 is a float, as in YAML 1.2)
     except FileNotFoundError:
         raise ConfigError(f"config file not found: {path}") from None
     except yaml.YAMLError as exc:

@@ -14,7 +14,10 @@ from ..backends.packing import pack
 from ..backends.threads import SERIAL_BELOW
 from ..physics.scalar import scalar_model
 from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
-from .functional import DISABLED, NEXT_STEP, SAME_STEP, EnvState, env_params, kinetic_energy
+from ..physics.faults import warn_episode_fault
+from .functional import (DISABLED, LIMIT_ACTION, LIMIT_LAW_NONFINITE, LIMIT_NAMES, NEXT_STEP, SAME_STEP, EnvState,
+                         env_params, kinetic_energy)
+from .limits import check_int64, check_memory, vector_env_bytes
 from .scene import resolve
 
 MAX_IMPACTS_IN_INFO = 8
@@ -49,7 +52,9 @@ class PennyVectorEnv(VectorEnv):
     ``PennyVectorEnv(num_envs, scene="ellipse", task="reach", max_episode_steps=None,
     autoreset_mode=AutoresetMode.NEXT_STEP, render_mode=None, backend="auto",
     max_impacts_in_info=8, **overrides)``. max_episode_steps: episodes are truncated after this
-    many steps (None: the task's).
+    many steps (None: the task's). A num_envs beyond int64, or whose arrays would not fit in the
+    memory available now (envs/limits.py estimates the bytes per env), is refused with a
+    ValueError that says how much it needs.
 
     Autoreset (``autoreset_mode``):
 
@@ -74,7 +79,8 @@ class PennyVectorEnv(VectorEnv):
     ``arc_impacts``       impacts task: running count of impacts on the marked arc
     ``is_success``        every step: the task's success condition (True only where it terminated)
     ``limit``             (num_envs,) int8: 0, or the documented limit that truncated the env's
-                          episode (1 "speed", 2 "impacts"; PennyEnv's table)
+                          episode (1 "speed", 2 "impacts", 3 "law_nonfinite", 4 "law_energy",
+                          5 "outside_wall"; PennyEnv's table)
     ====================  =========================================================================
 
     **GPU** (``backend="cuda"``, ``device`` a CUDA device index, ``outputs`` "torch" or "numpy"): the
@@ -89,9 +95,10 @@ class PennyVectorEnv(VectorEnv):
     host (and raises on non-finite actions as the CPU does). ``backend="auto"`` takes CUDA where numba-cuda
     finds a GPU, with numpy outputs unless outputs="torch" is asked. docs/gpu.md.
 
-    Interrupted steps: a step interrupted by an exception (KeyboardInterrupt) may leave the
-    envs' bookkeeping half done (stepped but not marked for autoreset); the next step() then
-    raises ResetNeeded until a reset() of every env.
+    Interrupted steps and resets: a step or a reset interrupted by an exception (KeyboardInterrupt)
+    may leave the envs' bookkeeping half done (stepped but not marked for autoreset, half drawn); the
+    next step() then raises ResetNeeded until a reset() of every env. A reset whose seed or options are
+    refused changes nothing.
 
     reset options: ``reset_mask`` (num_envs,) bool, ``state`` ((6,) or (num_envs, 6)) and
     ``target`` ((2,) or (num_envs, 2)) for the envs reset (checked as PennyEnv's options).
@@ -110,13 +117,21 @@ class PennyVectorEnv(VectorEnv):
             raise TypeError(f"num_envs must be a positive integer, got {type(num_envs).__name__}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        check_int64("num_envs", num_envs)
         if isinstance(max_impacts_in_info, bool) or not isinstance(max_impacts_in_info, (int, np.integer)):
             raise TypeError(f"max_impacts_in_info must be an integer, got {type(max_impacts_in_info).__name__}")
         if max_impacts_in_info < 0:
             raise ValueError(f"max_impacts_in_info must be >= 0, got {max_impacts_in_info}")
+        check_int64("max_impacts_in_info", max_impacts_in_info)
         if max_episode_steps is not None:
             overrides["max_episode_steps"] = max_episode_steps
         self.scene, self.task = resolve(scene, task, **overrides)
+        # the envs' arrays must fit in memory (envs/limits.py): refused here rather than by a MemoryError in step()
+        from .tasks import task_record
+        per_env = vector_env_bytes(task_record(self.task.kind).obs_dim, int(max_impacts_in_info))
+        check_memory("num_envs", num_envs, per_env * int(num_envs),
+                     f"a PennyVectorEnv of that many envs ({per_env} B per env with max_impacts_in_info = "
+                     f"{max_impacts_in_info}; use fewer envs per process)")
         try:
             autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -145,7 +160,7 @@ class PennyVectorEnv(VectorEnv):
         self._setup()
 
     def _setup(self):
-        self._arc_scratch = None  # the step's arc counts (reused: the info does not return them)
+        self._arc_scratch = None  # the step's arc counts and guard faults (reused: the info returns neither)
         self._trails = None
         c = self._make_core()
         n = self.num_envs
@@ -158,6 +173,7 @@ class PennyVectorEnv(VectorEnv):
         self._renderers = None
         self._true = np.ones(n, dtype=bool)
         self._in_step = False
+        self._limits = None  # the last step's info["limit"] (CPU): DISABLED's guard faults are reported at reset()
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -236,11 +252,11 @@ class PennyVectorEnv(VectorEnv):
         out = (np.empty((n, c.obs_dim), dtype=np.float32), np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool),
                np.empty(n), np.empty(n, dtype=np.int8), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64),
                np.empty(final, dtype=np.float32), np.empty(n, dtype=bool))
-        if self._arc_scratch is None or self._arc_scratch.shape[0] != n:
-            self._arc_scratch = np.empty(n, dtype=np.int64)
+        if self._arc_scratch is None or self._arc_scratch[0].shape[0] != n:  # (the info returns neither)
+            self._arc_scratch = (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8))
         times, ends = np.empty((n, K)), np.empty((n, K), dtype=np.int8)
         buf = (np.full(n, K, dtype=np.int64), times.T, ends.T, np.empty((0, 6, n)), np.empty((0, n), dtype=np.int8),
-               self._arc_scratch)
+               *self._arc_scratch)
         return out, buf, times, ends
 
     def _warm_up(self):
@@ -262,13 +278,17 @@ class PennyVectorEnv(VectorEnv):
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         """Reset all envs (or those in ``options["reset_mask"]``). seed: int (env i gets seed + i),
-        a list of ints/None (one per env) or None."""
+        a list of ints/None (one per env) or None. A refused seed or option changes nothing; a reset
+        interrupted once it has begun changing the envs (Ctrl-C) makes the next step() raise ResetNeeded,
+        as an interrupted step does."""
         n = self.num_envs
         int_seed = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
         if not (seed is None or int_seed or isinstance(seed, (list, tuple, np.ndarray))):
             raise TypeError(f"seed must be an int >= 0, None or a list of {n} seeds, got {type(seed).__name__}")
+        seeds = None
         if int_seed:
             seed = check_seed(seed, "seed", n)
+            seeds = [int(seed) + i for i in range(n)]
         elif seed is not None:
             seed = [None if s is None else check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
             if len(seed) != n:
@@ -287,7 +307,12 @@ class PennyVectorEnv(VectorEnv):
                 if self._st is None and not mask.all():
                     raise ResetNeeded("the first reset must reset every env")
                 if self._in_step and not mask.all():
-                    raise ResetNeeded("the previous step was interrupted: reset every env (no reset_mask)")
+                    raise ResetNeeded("the previous step or reset was interrupted: reset every env (no reset_mask)")
+        if self._limits is not None and self.autoreset_mode == AutoresetMode.DISABLED:
+            self._warn_faults(self._limits[mask])  # guard faults of the episodes this reset ends
+        self._limits = None
+        # from here on the envs change: guarded as a step is (the flag is cleared once every row is whole)
+        self._in_step = True
         super().reset(seed=seed if int_seed else None)
         first = self._st is None
         host = self._new_state(n) if first else (self._gpu.state_to_host() if self._gpu is not None else self._st)
@@ -304,7 +329,6 @@ class PennyVectorEnv(VectorEnv):
                     episodes[i] = 0
         rows = np.flatnonzero(mask)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
-        self._in_step = False
         if first:
             self._trails = [[] for _ in range(n)] if self.render_mode else None
         if self._gpu is not None:
@@ -314,6 +338,7 @@ class PennyVectorEnv(VectorEnv):
                 S = self._gpu.host("S")
                 for i in rows:
                     self._trails[i] = [(S[X, i], S[Y, i])]
+            self._in_step = False  # (last: every row whole)
             return obs, info
         if first:
             self._st = host
@@ -337,14 +362,15 @@ class PennyVectorEnv(VectorEnv):
         info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
                           kinetic_energy(st.S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8),
                           st.time.copy(), st.dist.copy(), st.count.copy())
+        self._in_step = False  # (last: every row whole)
         return obs, info
 
     def step(self, actions):
         if self._st is None:
             raise ResetNeeded("PennyVectorEnv.step() called before reset()")
         if self._in_step:
-            raise ResetNeeded("PennyVectorEnv.step(): the previous step was interrupted (an exception such as "
-                              "KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
+            raise ResetNeeded("PennyVectorEnv.step(): the previous step() or reset() was interrupted (an exception such "
+                              "as KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         if self._gpu is not None:
             return self._gpu.step(actions)
         n = self.num_envs
@@ -358,9 +384,21 @@ class PennyVectorEnv(VectorEnv):
         obs, rew, term, trunc, energy, limit, time, dist, count, final_obs, done = out
         self._extend_trails()
         info = self._info(buf[0], times, ends, energy, term, limit, time, dist, count)
+        self._limits = limit
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            self._warn_faults(limit[done])
             self._final_info(info, final_obs, done, term)
         return obs, rew, term, trunc, info
+
+    def _warn_faults(self, limits):
+        """A warning for the episodes that the event loop's guard ended (physics/faults.py), one per kind: where
+        the host sees the ended envs anyway (SAME_STEP's step, DISABLED's reset), so that no reduction over the
+        envs is added to the step's hot path; info["limit"] names every one of them."""
+        if limits is None:
+            return
+        faults = limits[(limits >= LIMIT_LAW_NONFINITE) & (limits != LIMIT_ACTION)]
+        for code in np.unique(faults):
+            warn_episode_fault(LIMIT_NAMES[code], int(code) - 2, self._core.law, self._core.table)
 
     def _final_info(self, info, final_obs, done, terminated):
         """SAME_STEP autoreset: the last obs and info of the envs whose episode ended (SB3-style object arrays

@@ -79,17 +79,32 @@ class LawRecord:
 
 LAW_KINDS: dict = {}      # name -> LawRecord
 COMPILED_LAWS: list = []  # the distinct update functions; Model.law indexes it
+BUILTIN_LAWS = ("elastic", "restitution", "plastic")  # names no user registration may replace
+
+
+def is_builtin_law(update) -> bool:
+    """update is one of penny_env's own functions (compiled in the package's namespace, cached on disk)."""
+    return getattr(update, "__module__", None) is not None and update.__module__.startswith("penny_env.")
 
 
 def register_law(name: str, update, e: float = 1.0, *, jacobian=None, conserves_energy: bool = False) -> None:
     """Make ``make_law(name)`` the law whose post-impact velocities are ``update(W, w, a, b, grad2, e,
     Itot, J, m) -> (W+, w+)`` (W, w: theta_dot, phi_dot before; n = a W + b w the end's outward normal
     velocity, grad2 = |grad h|^2; Itot = I + m R^2). ``update`` must be plain math (numba compiles it
-    into the event loop) and must not increase the kinetic energy; e is the coefficient it receives.
+    into the event loop) and must not increase the kinetic energy; e is the coefficient it receives
+    (a finite real number).
     jacobian: ``jacobian(W, w, a, b, grad2, e, Itot, J, m) -> ((W+, w+), D)`` (D: 2 x 5, derivatives
     w.r.t. (W, w, a, b, grad2)) for the sensitivities, or None (they then report jacobian_valid
     False). conserves_energy: True only for a law that keeps the kinetic energy exactly (the event
-    loop then never stops an accumulation of impacts)."""
+    loop then never stops an accumulation of impacts).
+
+    The law is tried before it is accepted (physics/law_checks.py): a wrong signature, a result that is
+    not two real numbers (TypeError), an exception, a non-finite result or an energy gain on typical
+    impacts, or a function numba cannot compile (ValueError) are refused with a message naming the law.
+    Registering a name again replaces its law for everything built afterwards (make_law, simulate, the
+    batch API, new environments; the compiled code is built anew), with a UserWarning: environments and
+    batches built before keep the law they were built with. The built-in names (BUILTIN_LAWS) cannot
+    be replaced."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"register_law: name must be an identifier, got {name!r}")
     if not callable(update):
@@ -98,9 +113,31 @@ def register_law(name: str, update, e: float = 1.0, *, jacobian=None, conserves_
         raise TypeError("register_law: jacobian must be a function or None")
     if not isinstance(conserves_energy, bool):
         raise TypeError(f"register_law: conserves_energy must be a bool, got {type(conserves_energy).__name__}")
-    LAW_KINDS[name] = LawRecord(name, update, float(e), jacobian, conserves_energy)
-    if law_index(update) < 0:
-        COMPILED_LAWS.append(update)
+    from .validation import is_real
+    if not is_real(e):
+        raise TypeError(f"register_law({name!r}): e must be a real number, got {type(e).__name__} {e!r}")
+    if not math.isfinite(float(e)):
+        raise ValueError(f"register_law({name!r}): e must be finite, got {e!r}")
+    if name.strip().lower() in BUILTIN_LAWS and not is_builtin_law(update):
+        raise ValueError(f"register_law: {name!r} is a built-in law and cannot be replaced (every environment id "
+                         "runs it); register yours under another name")
+    from .law_checks import check_law
+    check_law(name, update, float(e), conserves_energy, compile_check=not is_builtin_law(update))
+    record = LawRecord(name, update, float(e), jacobian, conserves_energy)
+    old = LAW_KINDS.get(name)
+    _register(record)
+    if old is not None and old != record:
+        import warnings
+        warnings.warn(f"register_law: {name!r} now names the new law for everything built from here on; environments "
+                      "and batches built before keep the law they were built with (build them again)", UserWarning,
+                      stacklevel=2)
+
+
+def _register(record: LawRecord) -> None:
+    """The record into the registry (its update function compiled once, under its index in COMPILED_LAWS)."""
+    LAW_KINDS[record.name] = record
+    if law_index(record.update) < 0:
+        COMPILED_LAWS.append(record.update)
 
 
 def law_index(update) -> int:
@@ -111,9 +148,17 @@ def law_index(update) -> int:
     return -1
 
 
-register_law("elastic", restitution_update, 1.0, jacobian=restitution_jacobian, conserves_energy=True)
-register_law("restitution", restitution_update, 1.0, jacobian=restitution_jacobian)  # (e = 1 is "elastic")
-register_law("plastic", plastic_update, 0.0, jacobian=plastic_jacobian)
+def builtin_law_indices() -> tuple:
+    """Indices in COMPILED_LAWS of penny_env's own laws: every compiled build holds them (and, besides them, only
+    the one user law its Model runs: physics/compiled.py's variant_key), so that a user's law never enters
+    the code of an environment that does not use it."""
+    return tuple(k for k, f in enumerate(COMPILED_LAWS) if is_builtin_law(f))
+
+
+# (penny_env's own laws: registered without the trials, which tests/test_law_checks.py runs on them)
+_register(LawRecord("elastic", restitution_update, 1.0, restitution_jacobian, True))
+_register(LawRecord("restitution", restitution_update, 1.0, restitution_jacobian))  # (e = 1 is "elastic")
+_register(LawRecord("plastic", plastic_update, 0.0, plastic_jacobian))
 
 
 @dataclass(frozen=True)
@@ -147,6 +192,8 @@ def make_law(law) -> ImpactLaw:
     if isinstance(law, ImpactLaw):
         return law
     if isinstance(law, str):
+        if law in LAW_KINDS and law not in BUILTIN_LAWS:  # a registered name as given (names are case-sensitive)
+            return ImpactLaw(law, LAW_KINDS[law].e)
         key = law.strip().lower()
         if key == "elastic":
             return ImpactLaw("elastic", 1.0)

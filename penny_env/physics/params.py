@@ -87,6 +87,8 @@ class SolverSettings:
                 raise TypeError(f"SolverSettings.{name} must be an integer, got {type(v).__name__}")
             if v < 1:
                 raise ValueError(f"SolverSettings.{name} must be a positive integer, got {v!r}")
+            if v > 2**63 - 1:  # (the compiled loop holds it in an int64)
+                raise ValueError(f"SolverSettings.{name} must be <= 2**63 - 1 (an int64), got {v!r}")
             object.__setattr__(self, name, int(v))
 
 

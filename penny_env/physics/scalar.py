@@ -38,6 +38,7 @@ from typing import NamedTuple
 
 from .flows import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_COUNTS, RULE_LIMITS, RULE_NODES,
                    RULE_WEIGHTS, phase_sweep)
+from .law_checks import ENERGY_RTOL
 from .laws import COMPILED_LAWS, law_index
 from .tables.base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind
 from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step, displacement_closed,
@@ -62,6 +63,7 @@ class Model(NamedTuple):
     D3: float            # third_derivative_bound
     jump: float          # hessian_jump
     delta: float         # contact tolerance [m]
+    outside_tol: float   # an end found farther outside the wall at an impact: FAULT_OUTSIDE [m]
     e: float             # the law's coefficient (restitution e)
     law: int             # index of the law's update function in laws.COMPILED_LAWS
     elastic: bool        # the law keeps the kinetic energy: an accumulation never brings the penny to rest
@@ -165,6 +167,13 @@ def table_constants(table):
     return kind, c + (0.0,) * (N_CONSTANTS - len(c))
 
 
+OUTSIDE_TOL = 1e-8  # [table sizes] an end found farther outside the wall at an impact is a fault (FAULT_OUTSIDE):
+# 10 times what validation.check_inside lets a given state have, about 10^6 times the search's own penetration
+SEARCH_SPEED2_FLOOR = 1e-290  # [m^2/s^2] below this squared end speed the certificate's squares leave float64's
+# normal range (a plastic penny wedged in a table 1.0001 R wide decays to 1e-159 rad/s): the search's penetrations
+# are then underflow, not false bounds, and the guard does not judge them (relocate1 repairs them, as before)
+
+
 def scalar_model(params, table, law, settings) -> Model:
     """The Model of the physics objects (table None: the open plane). Built anew on every call (a few
     microseconds): a cache keyed on the objects would hand one user table, or a law re-registered under
@@ -172,6 +181,7 @@ def scalar_model(params, table, law, settings) -> Model:
     if table is None:
         kind, consts, G, L, third, D3, jump, delta = OTHER, (0.0,) * N_CONSTANTS, 0.0, 0.0, False, 0.0, 0.0, 0.0
         other = 0
+        outside = math.inf
     else:
         kind, consts = table_constants(table)
         other = 0
@@ -180,7 +190,8 @@ def scalar_model(params, table, law, settings) -> Model:
             _OTHER_TABLES[other] = table
         third, D3, jump = third_order(table)
         G, L, delta = float(table.grad_bound), float(table.hessian_bound), settings.contact_tol * table.size
-    return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta,
+        outside = max(OUTSIDE_TOL * table.size, 64.0 * delta)
+    return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta, outside,
                  float(law.e), law_index(law.update), law.conserves_energy, int(settings.max_search_steps), int(settings.zeno_impacts),
                  float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
@@ -364,15 +375,51 @@ def first_impact_resumed(s0, acc1, acc2, horizon, m, rounds):
 # -- impacts -------------------------------------------------------------------------------------
 def relocate1(s, m):
     """Move the contact point so that neither end is outside the wall (round-off repairs)."""
+    return relocate_measured1(s, m)[0]
+
+
+def relocate_measured1(s, m):
+    """(relocate1's state, the larger wall function h of the two ends of s itself): h > 0 is how far outside
+    the wall an end was found, which the run-time guard compares with m.outside_tol. (The back end is
+    measured before the front end's repair moves it: in a table barely wider than the penny that repair
+    pushes the other end out by more than the search ever lets an end in.)"""
     x, y = s[0], s[1]
+    depth = -math.inf
     for sigma in (1.0, -1.0):
         px, py, _, _ = end_point(x, y, s[3], s[4], s[5], sigma, m.R, SCALAR)
         g, hx, hy = wall_terms(m, px, py)
+        if x == s[0] and y == s[1]:
+            depth = max(depth, g)
+        else:  # (moved by the front end's repair: the back end of s itself)
+            qx, qy, _, _ = end_point(s[0], s[1], s[3], s[4], s[5], sigma, m.R, SCALAR)
+            depth = max(depth, wall_terms(m, qx, qy)[0])
         if g > 0.0:
             k = g / (hx * hx + hy * hy)
             x -= k * hx
             y -= k * hy
-    return (x, y, s[2], s[3], s[4], s[5])
+    return (x, y, s[2], s[3], s[4], s[5]), depth
+
+
+# -- the run-time guard: faults the event loop records (ImpactBuffers.fault) rather than raising in compiled code
+FAULT_NONE, FAULT_NONFINITE, FAULT_ENERGY, FAULT_OUTSIDE = 0, 1, 2, 3  # (names: physics/faults.py)
+
+
+def law_fault(pre, post, m):
+    """FAULT_NONFINITE if the law gave a non-finite velocity, FAULT_ENERGY if it added kinetic energy beyond
+    round-off (laws.ENERGY_RTOL; no law may add any), else FAULT_NONE. Only at impacts: the hot path of
+    impact-free steps never pays for it."""
+    W, w = post[4], post[5]
+    if not (math.isfinite(W) and math.isfinite(w)):
+        return FAULT_NONFINITE
+    before = m.Itot * (pre[4] * pre[4]) + m.J * (pre[5] * pre[5])
+    if m.Itot * (W * W) + m.J * (w * w) > before * (1.0 + ENERGY_RTOL):
+        return FAULT_ENERGY
+    return FAULT_NONE
+
+
+def record_fault(buf, row, code):
+    """Fault ``code`` of penny ``row`` into buf (its caller raises, or ends the episode: physics/faults.py)."""
+    buf.fault[row] = code
 
 
 def law1(s, sigma, m):
@@ -420,6 +467,11 @@ class ImpactBuffers(NamedTuple):
     rest (Kp, N) int8     0, REST (the impact ended an accumulation: the penny is at rest) or PINNED (at
                           rest and held against the wall by the controls until the interval ends)
     arc_count (N,) int64  impacts whose contact point lies on the marked arc (record_impact's ``arc``)
+    fault (N,) int8       FAULT_NONE, or the run-time guard's FAULT_* that stopped the penny's call at an
+                          impact (a law or a table that breaks its contract). Written by advance_into
+                          only (cleared when it starts), so that steps without an impact search never
+                          touch it: read it after a call on fresh buffers (impact_buffers), or where
+                          the call stopped early (elapsed < dt, as a fault stops it at its impact)
 
     The slots hold the first K impacts; the overflow flag of penny i is ``count[i] > K``
     (:func:`overflowed`): its caller reruns that penny with a larger buffer (the loop is a pure
@@ -431,6 +483,7 @@ class ImpactBuffers(NamedTuple):
     post: object
     rest: object
     arc_count: object
+    fault: object
 
 
 def impact_buffers(n, capacity, empty=False, states=True) -> ImpactBuffers:
@@ -440,7 +493,8 @@ def impact_buffers(n, capacity, empty=False, states=True) -> ImpactBuffers:
     new = np.empty if empty else np.zeros
     kp = capacity if states else 0
     return ImpactBuffers(np.zeros(n, dtype=np.int64), new((capacity, n)), new((capacity, n), dtype=np.int8),
-                         new((kp, 6, n)), new((kp, n), dtype=np.int8), np.zeros(n, dtype=np.int64))
+                         new((kp, 6, n)), new((kp, n), dtype=np.int8), np.zeros(n, dtype=np.int64),
+                         np.zeros(n, dtype=np.int8))
 
 
 def overflowed(buf):
@@ -450,7 +504,8 @@ def overflowed(buf):
 
 def clear_row(buf, row):
     """Penny ``row``'s count and arc count set to 0 before a call writes its impacts. (By position: it is
-    inlined into parallel loops, where numba loses writes made through a NamedTuple's attribute.)"""
+    inlined into parallel loops, where numba loses writes made through a NamedTuple's attribute. The fault
+    is cleared by advance_into, which only impact searches reach.)"""
     count = buf[0]
     arc_count = buf[5]
     count[row] = 0
@@ -488,11 +543,18 @@ def advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
     (SolverSettings.max_events_per_interval: it bounds the work of one call, never the physics); the
     caller resumes from there (:func:`advance_through_into`).
 
+    The run-time guard (the impacts only) stops the call at an impact, recording a FAULT_* in buf.fault:
+    FAULT_OUTSIDE with the state where an end was found more than m.outside_tol outside the wall (the
+    table's bounds or formulas are false), FAULT_NONFINITE / FAULT_ENERGY with the state right before the
+    impact whose law gave a non-finite velocity or added energy (:func:`law_fault`). elapsed is then the
+    impact's time. The motion up to there is the one without the guard.
+
     Only an accumulation brings a penny to rest: m.zeno_impacts consecutive impacts each closer
     than the time-resolution window to the previous one, under a dissipative law. An elastic
     penny is never stopped (it keeps its energy; tables too narrow for the search to resolve its
     impacts are refused up front, validation.check_table)."""
     R = m.R
+    record_fault(buf, row, FAULT_NONE)
     if not dt > 0.0:
         return s, 0.0
     elapsed = 0.0
@@ -504,13 +566,22 @@ def advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
         t_hit, end = first_impact_m(s, acc1, acc2, rem, m)
         if end == 0:
             return flow1(s, acc1, acc2, rem, R), dt
-        pre = relocate1(flow1(s, acc1, acc2, t_hit, R), m)
+        reached = flow1(s, acc1, acc2, t_hit, R)
+        pre, depth = relocate_measured1(reached, m)
+        if depth > m.outside_tol and R * R * (pre[4] * pre[4] + pre[5] * pre[5]) > SEARCH_SPEED2_FLOOR:
+            # the search stepped past the wall: the table's bounds or formulas are false
+            record_fault(buf, row, FAULT_OUTSIDE)
+            return reached, elapsed + t_hit
         if end == 2 or wall1(pre, float(end), m)[1] <= 0.0:
             # search budget spent on a tangency, or a grazing touch that turned inward: go on from there
             s = pre
             elapsed += t_hit
             continue
         post = law1(pre, float(end), m)
+        fault = law_fault(pre, post, m)
+        if fault != FAULT_NONE:  # the law broke its contract: stop at the impact, before it (the caller reports it)
+            record_fault(buf, row, fault)
+            return pre, elapsed + t_hit
         elapsed += t_hit
         t_impact = elapsed
         n_events += 1
@@ -542,10 +613,11 @@ def advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc):
     stopped early, so the motion is that of one uninterrupted call (the one resumption loop of the
     package). Returns (state, elapsed); the impacts go into row ``row`` of buf (not cleared), their
     times counted from the interval's start; elapsed is dt, or less when stop_after > 0 impacts were
-    reached (the state is then the one right after that impact)."""
+    reached (the state is then the one right after that impact) or when the guard recorded a fault
+    (buf.fault, :func:`advance_into`)."""
     first = buf.count[row]
     s, elapsed = advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, 0.0, arc)
-    while elapsed < dt and not (stop_after > 0 and buf.count[row] - first >= stop_after):
+    while elapsed < dt and buf.fault[row] == FAULT_NONE and not (stop_after > 0 and buf.count[row] - first >= stop_after):
         rem = dt - elapsed
         left = stop_after - (buf.count[row] - first) if stop_after > 0 else 0
         s, step = advance_into(s, acc1, acc2, rem, m, left, buf, row, elapsed, arc)
@@ -585,12 +657,15 @@ def impacts_of(buf, row):
     return impacts, rests
 
 
-def _with_lists(run, capacity):
+def _with_lists(run, capacity, law=None, table=None):
     buf = impact_buffers(1, capacity)
     s, elapsed = run(buf)
     if buf.count[0] > capacity:  # the loop is pure: run it again with room for every impact
         buf = impact_buffers(1, int(buf.count[0]))
         s, elapsed = run(buf)
+    if buf.fault[0] != FAULT_NONE:  # the run-time guard stopped the call (physics/faults.py)
+        from .faults import fault_error
+        raise fault_error(buf.fault[0], law, table, where=f"t = {elapsed:.6g} s")
     impacts, rests = impacts_of(buf, 0)
     return s, impacts, rests, elapsed
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from .scalar import NO_ARC, flow1, impact_buffers, impacts_of, overflowed, relocate1, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
+from .faults import check_mapped, fault_error
 from .laws import apply_law, make_law
 from .params import PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
@@ -104,6 +105,9 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     settings: SolverSettings. Work and memory are bounded: inputs beyond the documented limits
     (speeds, steering phase per interval, SolverSettings.max_impacts; docs/physics.md, Limits)
     raise a ValueError naming the field and the limit.
+    A law or a table that breaks its contract at an impact (a non-finite velocity, an energy gain, an
+    end found outside the wall: the event loop's run-time guard, physics/faults.py) raises a ValueError
+    naming the law or the table and the bound to fix.
     sensitivities: also return jacobian (d final_state / d state, 6 x 6) and, with controls,
     control_jacobian (6 x 2K), exact through every impact; jacobian_valid False (NaN matrices,
     jacobian_reason says why) where no derivative exists (physics/sensitivity.py).
@@ -189,6 +193,8 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         if overflowed(buf)[0]:  # more impacts than the buffer holds: the same pure call with room for all
             buf = impact_buffers(1, int(buf.count[0]))
             s1, elapsed = drive(buf)
+        if buf.fault[0]:  # the event loop's guard stopped at an impact: a law or table that breaks its contract
+            raise fault_error(buf.fault[0], law, table, s1, params.R, f"t = {t0 + elapsed:.6g} s")
         state = s1
         impacts, rest_events = impacts_of(buf, 0)
         for ti, end, post in impacts:
@@ -256,7 +262,8 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     The law's formula is applied as a map on the impact surface whatever the sign of the
     normal velocity (the simulator only calls it for ends moving outward). For the plastic law
     an end left moving outward (possible when I > m R^2 or J > m R^2, see laws.py) gets its
-    normal velocity removed."""
+    normal velocity removed. A law that returns a non-finite velocity, or adds kinetic energy where the end
+    moves outward, raises a ValueError naming it (physics/faults.py)."""
     params = check_params(params)
     if table is None:
         raise ValueError("table is required for impact_map")
@@ -273,4 +280,6 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     if abs(g) > 1e-8 * table.size:
         label = "front" if end == 1 else "back"
         raise ValueError(f"state: the {label} end is not on the wall (h = {g:.3g})")
-    return apply_law(S, float(end), params, table, law)[:, 0]
+    post = apply_law(S, float(end), params, table, law)
+    check_mapped(S, post, float(end), params, table, law, "state")  # (the guard of the event loop, for the map)
+    return post[:, 0]

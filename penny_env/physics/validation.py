@@ -17,6 +17,7 @@ from .flows import end_kinematics
 from .params import (DEFAULT_SETTINGS, MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MAX_STEERED_PHASE, MIN_GAP,
                      PennyParams, SolverSettings)
 from .tables import as_table
+from .tables.registered import check_registered
 
 STATE_FIELDS = ("x", "y", "theta", "phi", "theta_dot", "phi_dot")
 
@@ -146,9 +147,12 @@ def check_actuation(params: PennyParams, u1_max: float, u2_max: float, control_d
             raise ValueError(f"torque_limits.{name} = {u1_max if name == 'u1' else u2_max!r} N m adds {gain:.3g} rad/s in "
                              f"one control_dt, beyond the limit MAX_ANGULAR_SPEED = {MAX_ANGULAR_SPEED:g} rad/s")
     sweep = u1_max * control_dt ** 2 / params.J
-    if sweep > MAX_STEERED_PHASE:
-        raise ValueError(f"torque_limits.u1 = {u1_max!r} N m sweeps {sweep:.3g} rad of heading in one control_dt, beyond "
-                         f"the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad")
+    # (decided by step_speed_limits' own arithmetic: a torque at the limit, whose sweep rounds to just below it,
+    # left a bound of -2e-13 rad/s that the next check then blamed on scene.init.phi_dot)
+    if sweep > MAX_STEERED_PHASE or step_speed_limits(params, u1_max, u2_max, control_dt)[1] < 0.0:
+        raise ValueError(f"torque_limits.u1 = {u1_max!r} N m sweeps {sweep:.6g} rad of heading in one control_dt, at or "
+                         f"beyond the limit MAX_STEERED_PHASE = {MAX_STEERED_PHASE:g} rad: a step from any turning speed "
+                         "could pass it")
 
 
 def step_speed_limits(params: PennyParams, u1_max: float, u2_max: float, control_dt: float) -> tuple[float, float]:
@@ -181,9 +185,12 @@ def check_params(params) -> PennyParams:
 
 
 def check_table(table, params: PennyParams):
+    """The table (as_table) checked for the penny: a registered shape from outside penny_env has its formulas and
+    bounds checked on a grid (tables/registered.py, once per table), and the table must fit the penny."""
     table = as_table(table)
     if table is None:
         return None
+    check_registered(table)
     if not table.inradius > params.R:
         raise ValueError(f"table: too small for the penny, its inradius {table.inradius:.6g} m is not larger than R = {params.R:.6g} m")
     if table.inradius < params.R * (1.0 + MIN_GAP):

@@ -97,22 +97,30 @@ class Table:
         """The numbers that define the table (its repr, equality and hash). By default every public
         instance attribute, so that two tables of a class that does not name its parameters are equal
         only when everything they hold is; the built-in tables name their constructor's arguments."""
-        return {k: _hashable(v) for k, v in sorted(vars(self).items()) if not k.startswith("_")}
+        return {k: _plain(v) for k, v in sorted(vars(self).items()) if not k.startswith("_")}
+
+    def _key(self) -> tuple:
+        """What tells two tables apart: the type, _fields(), and the numbers the event loop reads (constants()
+        and the protocol's bounds), so that a subclass whose _fields() leaves a number out is still told apart
+        by what the physics reads."""
+        numbers = tuple(_plain(getattr(self, k, None)) for k in ("grad_bound", "hessian_bound", "inradius",
+                                                                   "third_derivative_bound", "hessian_jump", "extent"))
+        return (type(self), tuple(self._fields().items()), _plain(self.constants()), numbers)
 
     def __eq__(self, other) -> bool:
-        return type(self) is type(other) and self._fields() == other._fields()
+        return type(self) is type(other) and self._key() == other._key()
 
     def __hash__(self) -> int:
-        return hash((type(self).__qualname__, tuple(self._fields().items())))
+        return hash(self._key())
 
 
-def _hashable(v):
-    """v with lists and arrays as tuples (a table's attributes, for its equality and hash)."""
-    if isinstance(v, np.ndarray):
-        return (v.shape,) + tuple(v.ravel().tolist())
-    if isinstance(v, (list, tuple)):
-        return tuple(_hashable(x) for x in v)
-    return v
+def _plain(value):
+    """value with numpy scalars and arrays as Python floats and tuples (hashable, compared by value)."""
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return tuple(_plain(v) for v in value)
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value
 
 
 LENGTH_RANGE = (1e-100, 1e100)  # table numbers outside it overflow or underflow in 1/a^2, a^2, ... (no ZeroDivisionError)
@@ -140,16 +148,38 @@ def register_table(name: str, cls) -> None:
     """Make ``make_table({"kind": name, ...})`` (and scene YAML ``table: {kind: name, ...}``) build
     ``cls(...)``; a class with static ``terms`` and ``hess`` also runs in the compiled event loop (and
     ``ray(c, cos, sin)``, optional, gives the distance from the centre to the wall along a direction; without
-    it the compiled code bisects on terms' h)."""
+    it the compiled code bisects on terms' h).
+
+    The formulas are tried first (tables/registered.py): their signature ``(c, x, y)`` and, where numba
+    is installed, that numba compiles them (TypeError / ValueError naming the class otherwise); each
+    instance is then checked on a grid before a penny rolls on it (validation.check_table: the formulas
+    against its own h, grad and hessian, its bounds and shape as a ConvexTable's). Registering a name
+    again replaces the class for every table built afterwards, with a UserWarning; the names of
+    penny_env's own shapes cannot be taken by another class."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"register_table: name must be an identifier, got {name!r}")
     if name in ("none", "plane"):
         raise ValueError(f"register_table: {name!r} is reserved for the open plane")
-    TABLE_KINDS[name] = cls
-    if cls.terms is not None and compiled_kind(cls) < 0:
+    if not isinstance(cls, type):
+        raise TypeError(f"register_table: cls must be a class, got {type(cls).__name__}")
+    old = TABLE_KINDS.get(name)
+    own = cls.__module__.startswith("penny_env.")
+    if old is not None and old.__module__.startswith("penny_env.") and not own:
+        raise ValueError(f"register_table: {name!r} is one of penny_env's own table shapes and cannot be replaced "
+                         "(environment ids use it); register yours under another name")
+    if cls.terms is not None:
         if cls.hess is None:
             raise ValueError(f"register_table: {cls.__name__} defines terms but not hess")
+        if not own:
+            from .registered import check_formulas_compile
+            check_formulas_compile(cls)
+    TABLE_KINDS[name] = cls
+    if cls.terms is not None and compiled_kind(cls) < 0:
         COMPILED_FORMULAS.append((cls.terms, cls.hess, getattr(cls, "ray", None)))
+    if old is not None and old is not cls:
+        import warnings
+        warnings.warn(f"register_table: {name!r} now builds {cls.__name__}; tables, environments and batches built "
+                      "before keep the class they were built with", UserWarning, stacklevel=2)
 
 
 def compiled_kind(table_or_cls) -> int:

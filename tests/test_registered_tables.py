@@ -1,0 +1,168 @@
+"""A table shape registered with register_table is held to what a ConvexTable is held to (issue 31, deliverable 1;
+physics/tables/registered.py): its compiled formulas against its own h, grad and hessian, and its bounds, on a
+grid, before a penny rolls on it; its formulas must compile. Also the table side of the stale-cache defect:
+instances of a user class that does not define _fields() compared equal, so scalar_model's cache handed one
+table another's constants (Table._key, the minimal fix of issue 29 item 1)."""
+import numpy as np
+import pytest
+
+import penny_env as pe
+import penny_env.batch as pb
+from penny_env.envs.scene import ConfigError
+from penny_env.physics import PennyParams, SolverSettings
+from penny_env.physics import tables as T
+from penny_env.physics.laws import make_law
+from penny_env.physics.scalar import scalar_model
+from penny_env.physics.tables.base import Table, length
+
+
+def disc_terms(c, x, y):
+    r2, inv = c[0], c[1]
+    return (x * x + y * y - r2) * 0.5 * inv, x * inv, y * inv
+
+
+def disc_terms_wrong(c, x, y):  # one wrong factor, as in the reliability trial (pennies left the table by 1.3 to 33 mm)
+    r2, inv = c[0], c[1]
+    return (x * x + y * y - r2) * 0.5 * inv, x * inv, 1.1 * y * inv
+
+
+def disc_hess(c, x, y):
+    return c[1], 0.0, c[1]
+
+
+def disc_hess_wrong(c, x, y):
+    return c[1], 0.0, 2.0 * c[1]
+
+
+class Disc(Table):
+    """docs/extending.md's example shape, without _fields() (so its equality comes from its constants)."""
+
+    name = "disc"
+    terms = staticmethod(disc_terms)
+    hess = staticmethod(disc_hess)
+    third_derivative_bound = 0.0
+    hessian_jump = 0.0
+
+    def __init__(self, r, hessian_bound=None):
+        self.r = length("Disc", "r", r)
+        self.grad_bound = 1.0
+        self.hessian_bound = 1.0 / self.r if hessian_bound is None else hessian_bound
+        self.inradius, self.extent = self.r, (-self.r, self.r, -self.r, self.r)
+
+    def constants(self):
+        return (self.r * self.r, 1.0 / self.r)
+
+    def h(self, x, y):
+        return (x * x + y * y - self.r * self.r) * 0.5 / self.r
+
+    def grad(self, x, y):
+        return x / self.r, y / self.r
+
+    def hessian(self, x, y):
+        return 1.0 / self.r + 0.0 * x, 0.0 * x, 1.0 / self.r + 0.0 * y
+
+
+@pytest.fixture
+def shapes():
+    """register_table, with every registration undone afterwards."""
+    n = len(T.COMPILED_FORMULAS)
+    kinds = dict(T.TABLE_KINDS)
+
+    def register(name, cls):
+        pe.register_table(name, cls)
+    yield register
+    T.TABLE_KINDS.clear()
+    T.TABLE_KINDS.update(kinds)
+    del T.COMPILED_FORMULAS[n:]
+
+
+def variant(name, **attrs):
+    return type(name, (Disc,), attrs)
+
+
+def test_a_sound_registered_shape_runs(shapes):
+    shapes("disc", Disc)
+    tr = pe.simulate([0, 0, 0, 1.0, 20.0, 0.5], table=Disc(0.1), t_final=2.0)
+    assert tr.n_impacts > 3
+    env = pe.PennyEnv("circle", "reach", table={"kind": "disc", "r": 0.1}, backend="python")
+    env.reset(seed=0)
+    env.step(np.zeros(2, np.float32))
+
+
+def test_a_wrong_factor_in_the_formulas_is_refused_before_a_penny_rolls(shapes):
+    shapes("bad_disc", variant("BadDisc", terms=staticmethod(disc_terms_wrong)))
+    table = T.make_table({"kind": "bad_disc", "r": 0.1})
+    match = r"table disc \(BadDisc\): the compiled formula terms gives dh/dy = .* where the table's own method gives"
+    with pytest.raises(ValueError, match=match):
+        pe.simulate([0, 0, 0, 1.0, 20.0, 0.5], table=table, t_final=0.5)
+    with pytest.raises(ValueError, match=match):
+        pb.simulate(np.zeros((1, 6)), table=table, t_final=0.5, backend="python")
+    with pytest.raises(ConfigError, match=match):
+        pe.PennyEnv("circle", "reach", table={"kind": "bad_disc", "r": 0.1})
+
+
+def test_a_wrong_hessian_formula_is_refused(shapes):
+    shapes("bad_hess", variant("BadHess", hess=staticmethod(disc_hess_wrong)))
+    with pytest.raises(ValueError, match=r"the compiled formula hess gives hyy"):
+        pe.simulate([0, 0, 0, 1.0, 20.0, 0.5], table=T.make_table({"kind": "bad_hess", "r": 0.1}), t_final=0.5)
+
+
+def test_bounds_below_what_the_grid_shows_are_refused(shapes):
+    shapes("disc", Disc)
+    with pytest.raises(ValueError, match=r"table disc \(Disc\)\.hessian_bound=2.0 is below"):
+        pe.simulate([0, 0, 0, 1.0, 20.0, 0.5], table=Disc(0.1, hessian_bound=2.0), t_final=0.5)
+
+
+def test_formulas_must_take_c_x_y_and_compile(shapes):
+    with pytest.raises(TypeError, match=r"register_table: Two\.terms must take \(c, x, y\)"):
+        shapes("two", variant("Two", terms=staticmethod(lambda x, y: (x, x, y))))
+    pytest.importorskip("numba")
+
+    def helper(v):
+        return v
+
+    def uses_helper(c, x, y):
+        return helper(x) * c[0], x, y
+    with pytest.raises(ValueError, match=r"register_table: Helped\.terms: numba cannot compile it.*TypingError"):
+        shapes("helped", variant("Helped", terms=staticmethod(uses_helper)))
+    with pytest.raises(ValueError, match=r"Pairs\.hess must return three numbers"):
+        shapes("pairs", variant("Pairs", hess=staticmethod(lambda c, x, y: (c[0], c[1]))))
+    assert "two" not in T.TABLE_KINDS and "helped" not in T.TABLE_KINDS
+
+
+def test_the_built_in_shapes_cannot_be_replaced(shapes):
+    with pytest.raises(ValueError, match="one of penny_env's own table shapes"):
+        shapes("ellipse", Disc)
+    assert T.TABLE_KINDS["ellipse"] is pe.Ellipse
+
+
+def test_registering_a_name_again_replaces_the_class(shapes):
+    shapes("disc", Disc)
+    with pytest.warns(UserWarning, match="'disc' now builds Disc2"):
+        shapes("disc", variant("Disc2"))
+    assert type(T.make_table({"kind": "disc", "r": 0.1})).__name__ == "Disc2"
+
+
+def test_instances_without_fields_are_told_apart_by_their_constants(shapes):
+    # Table.__eq__ / __hash__ came from _fields(), {} by default: Disc(0.1) == Disc(0.2), and scalar_model's cache
+    # gave the second the first one's constants (a penny on the 0.2 table bounced off the 0.1 wall)
+    shapes("disc", Disc)
+    a, b = Disc(0.1), Disc(0.2)
+    assert a != b and a == Disc(0.1) and hash(a) == hash(Disc(0.1))
+    P, L, S = PennyParams(), make_law("elastic"), SolverSettings()
+    assert scalar_model(P, a, L, S) != scalar_model(P, b, L, S)
+    assert scalar_model(P, b, L, S).t0 == pytest.approx(0.04)
+    far = pe.simulate([0.15, 0, 0, 0.0, 10.0, 0.0], table=b, t_final=0.01)  # inside b, outside a
+    assert far.n_impacts == 0
+
+
+def test_a_class_whose_formulas_change_runs_the_new_ones(shapes):
+    cls = variant("Mutable")
+    shapes("mutable", cls)
+    table = cls(0.1)
+    P, L, S = PennyParams(), make_law("elastic"), SolverSettings()
+    before = scalar_model(P, table, L, S)
+    cls.terms = staticmethod(lambda c, x, y: ((x * x + y * y - c[0]) * 0.5 * c[1], x * c[1], y * c[1]))  # new formulas
+    pe.register_table("mutable", cls)
+    after = scalar_model(P, table, L, S)
+    assert after.kind != before.kind and T.COMPILED_FORMULAS[after.kind][0] is cls.terms
