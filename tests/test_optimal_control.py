@@ -1,6 +1,8 @@
 """Trajectory optimisation with and without impacts (training/optimal_control.py)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -251,23 +253,67 @@ def test_pays_needs_a_wall_hit_and_the_margin():
     def sol(rows, impacts, ok=True):
         return oc.Solution("optimal" if ok else "failed: x", rows, 0.1, np.zeros((rows, 2)), impacts, 0.0, 0.05, 0.0)
 
-    def row(w, wo):
-        return {"objective": "time", "with": w, "without": wo}
+    start, target = io.draw_pairs("ellipse", 1, seed=0)[0]
+
+    def row(w, wo, scene="ellipse"):
+        return {"objective": "time", "with": w, "without": wo, "scene": scene, "task": "reach", "start": start,
+                "target": target, "pair": 0}
     assert io.pays(row(sol(10, 1), sol(20, 0)))
     assert not io.pays(row(sol(10, 0), sol(20, 0)))          # better, but without touching the wall
     assert not io.pays(row(sol(20, 1), sol(20, 0)))          # no gain
     assert not io.pays(row(sol(39, 1), sol(40, 0)))          # 2.5 %: within the 5 % margin
-    assert io.pays(row(sol(39, 1), sol(0, 0, ok=False)))     # only feasible with the impact
+    assert not io.pays(row(sol(39, 1), sol(0, 0, ok=False)))  # the impact-free solver failed: not evidence
+    t2 = oc.Solution("infeasible (T2): without impacts |R theta_dot| stays 0.05 m/s > 0.01", 0, math.nan,
+                     np.zeros((0, 2)), 0, math.nan, 0.05, 0.0)
+    assert io.pays(row(sol(39, 1), t2))                      # no impact-free plan exists (theorem)
     assert not io.pays(row(sol(0, 0, ok=False), sol(0, 0, ok=False)))
-    rows = [dict(row(sol(10, 1), sol(20, 0)), scene="ellipse", actuation="drive", witness={"certified": True},
+    rows = [dict(row(sol(10, 1), sol(20, 0)), actuation="drive", witness={"certified": True},
                  with_source="witness") for _ in range(3)]
-    rows.append(dict(row(sol(20, 0), sol(20, 0)), scene="stadium", actuation="drive", witness={"certified": False},
+    rows.append(dict(row(sol(20, 0), sol(20, 0), "stadium"), actuation="drive", witness={"certified": False},
+                     with_source="zero"))
+    rows.append(dict(row(sol(12, 2), sol(0, 0, ok=False)), actuation="drive", witness={"certified": False},
                      with_source="zero"))
     pooled = [s for s in io.summarise(rows) if s["scene"] == "all"][0]
     from training.study_report import clopper_pearson
-    assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (4, 3, 3, 3)
-    assert pooled["ci"] == clopper_pearson(3, 4) and pooled["mean_gap"] == pytest.approx(0.5)
-    assert "impacts pay in 3 of 4 pairs" in io.answer([pooled])[0]
+    assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (5, 3, 3, 3)
+    assert (pooled["without_failed"], pooled["only_with_failed"]) == (1, 1)
+    assert pooled["ci"] == clopper_pearson(3, 5) and pooled["mean_gap"] == pytest.approx(0.5)
+    line = io.answer([pooled])[0]
+    assert "impacts pay in 3 of 5 pairs" in line and "impact-free solve failed in 1 pairs" in line
+    assert "certified in" in line
+
+
+def test_certified_lower_bounds_hold_for_impact_free_plans():
+    """training/oc_bounds.py: no impact-free plan reaches the terminal set in fewer rows than rows_lower_bound. Checked
+    on the impact pairs with random bang-bang and random torques (drive only and both controls, reach and park): every
+    row whose end is in the set comes no earlier than the bound. The tent integral is the formula's."""
+    from training import impact_oc as io
+    from training.oc_bounds import rows_lower_bound, tent_distance
+
+    assert tent_distance(2.0, math.inf, 40.0, 0.1) == pytest.approx(2.0 * 0.1 + 0.5 * 40 * 0.01)
+    assert tent_distance(10.0, 1.0, 40.0, 0.1) == -math.inf  # cannot brake from 10 to 1 rad/s in 0.1 s
+    assert tent_distance(1.0, 1.0, 40.0, 0.5) == pytest.approx(2 * (1.0 * 0.25 + 0.5 * 40 * 0.25 ** 2))
+    rng = np.random.default_rng(9)
+    checked = 0
+    for scene in io.SCENES:
+        for start, target in io.draw_pairs(scene, 4, seed=11):
+            for actuation, task in (("drive", "reach"), ("both", "park"), ("both", "reach")):
+                prob = oc.Problem(scene, task, start, target, impacts=False, actuation=actuation)
+                K_lb, _ = rows_lower_bound(prob, actuation)
+                for trial in range(6):
+                    K = 40
+                    v = rng.choice([-1.0, 1.0], (K, 2)) if trial % 2 else rng.uniform(-1, 1, (K, 2))
+                    if trial == 0:  # roll straight at the target as fast as the torque allows
+                        v[:, 1] = 1.0
+                    sol = io.replay(prob, v, first=True)
+                    if sol.traj is None or sol.traj.n_impacts:
+                        continue  # an impact: not an impact-free plan
+                    ends = sol.traj.states_at(prob.dt * np.arange(1, sol.rows + 1))
+                    hit = np.flatnonzero(io.in_set(prob, ends))
+                    if hit.size:
+                        assert hit[0] + 1 >= K_lb, (scene, actuation, task)
+                        checked += 1
+    assert checked > 5
 
 
 def test_impact_pairs_start_fast_near_the_wall_with_targets_near_it():
@@ -322,7 +368,7 @@ def test_impact_quick_run_writes_outside_docs(tmp_path):
         assert f"| {act} | time | all | 1 |" in text
     assert "- sources: sha256" in text and "Clopper-Pearson" in text and (tmp_path / "rows.pkl").is_file()
     # the steer pair: infeasible without impacts by T2, feasible with them (the witness certifies it)
-    assert "| steer only, park | time | all | 1 | 0 | 1 | 1 | 0 | 1 | 1/1" in text
+    assert "| steer only, park | time | all | 1 | 0 | 0 | 1 | 1 | 0 | 1 | 1/1" in text
     again = io.main(["--quick", "--report-only", "--out", str(tmp_path / "oc.md")]).read_text()
     assert again.split("## Answer")[1] == text.split("## Answer")[1]
     with pytest.raises(SystemExit, match="never writes into docs"):

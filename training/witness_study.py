@@ -261,10 +261,11 @@ def failures(pair_rows):
 
 
 def summary(cells):
-    """Per probe: (impossible tables, witnessed cells as (k, N), open cells)."""
+    """Per probe: (impossible tables, witnessed cells as (k, N), open cells), over the preset tables (TABLES; the
+    override cells of EXTRA_TABLES are reported on their own)."""
     out = {}
     for probe in PROBES:
-        cs = [c for c in cells if c["probe"] == probe]
+        cs = [c for c in cells if c["probe"] == probe and c["table"] in TABLES]
         imp = [c for c in cs if c["verdict"].startswith("impossible")]
         wit = [c for c in cs if c["verdict"].startswith("possible")]
         opn = [c for c in cs if c["verdict"].startswith("open")]
