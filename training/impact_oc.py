@@ -562,7 +562,7 @@ def answer(summary, margin=MARGIN) -> list[str]:
                 f"impact-free plan exists (theorem T2: theta_dot is conserved without impacts), so every feasible plan "
                 f"uses impacts: a plan with impacts was found in {s['feasible_with']} of {s['pairs']} pairs (witness "
                 f"episodes in {s['witnessed']}), none in {s['neither']}; the plans found are not shown optimal.")
-                continue
+            continue
         cert = (f"; **certified** in {s['certified']} of {s['pairs']} (the plan with impacts needs fewer rows than the "
                 "lower bound of every impact-free plan)" if s["objective"] == "time" else
                 "; no certificate (no lower bound on the effort of impact-free plans is computed)")

@@ -374,10 +374,16 @@ def spectra_rows(cases, two_traj, fmt):
 
 
 def _answer_block(out) -> list[str]:
-    """The question-2 answer block of the report being rewritten (billiards_answer writes it between its markers), kept
-    as it is; the markers alone where there is none yet."""
-    from .billiards_answer import README_BEGIN, README_END
+    """The question-2 answer between its markers: billiards_answer's block from its stored summary
+    (billiards_answer.json beside the report) where there is one, else the block the report already has (its
+    command writes it), else the markers with a pointer."""
+    import json
 
+    from .billiards_answer import README_BEGIN, README_END, answer_block
+
+    stored = out.with_name("billiards_answer.json")
+    if stored.is_file():
+        return [README_BEGIN, answer_block(json.loads(stored.read_text())), README_END]
     old = out.read_text() if out.is_file() else ""
     if README_BEGIN in old and README_END in old:
         return [README_BEGIN + old.split(README_BEGIN, 1)[1].split(README_END, 1)[0].rstrip("\n"), README_END]
