@@ -122,8 +122,8 @@ def test_readme_and_billiards_md_carry_the_committed_answer():
     import json
 
     summary = json.loads((ROOT / "docs" / "billiards_answer.json").read_text())
-    block = ba.answer_block(summary)
-    for path in (ROOT / "README.md", ROOT / "docs" / "billiards.md"):
+    for path, base in ((ROOT / "README.md", "docs/"), (ROOT / "docs" / "billiards.md", "")):
         text = path.read_text()
         got = text.split(ba.README_BEGIN, 1)[1].split(ba.README_END, 1)[0].strip()
-        assert got == block.strip(), path.name
+        assert got == ba.answer_block(summary, base).strip(), path.name
+        assert f"]({base}billiards_answer.md)" in got

@@ -382,7 +382,7 @@ def test_impact_quick_run_writes_outside_docs(tmp_path):
         assert f"| {act} | time | all | 1 |" in text
     assert "- sources: sha256" in text and "Clopper-Pearson" in text and (tmp_path / "rows.pkl").is_file()
     # the steer pair: infeasible without impacts by T2, feasible with them (the witness certifies it)
-    assert "| steer only, park | time | all | 1 | 0 | 0 | 1 | 1 | 0 | 1 | 1/1" in text
+    assert "| steer only, park | time | all | 1 | 0 | 0 | 1 | 1 | 0 | 1 | 1/1 = 1.00 [0.03, 1.00] (feasibility: T2)" in text
     again = io.main(["--quick", "--report-only", "--out", str(tmp_path / "oc.md")]).read_text()
     assert again.split("## Answer")[1] == text.split("## Answer")[1]
     with pytest.raises(SystemExit, match="never writes into docs"):

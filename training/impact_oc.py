@@ -392,8 +392,8 @@ def certified(row) -> bool:
     """Minimum time: the plan with impacts hits the wall and needs fewer rows than every impact-free plan can
     (the certified lower bound; for steer only, no impact-free plan exists)."""
     w = row["with"]
-    if row["objective"] != "time" or not w.ok or w.impacts == 0:
-        return False
+    if row["objective"] != "time" or not w.ok or w.impacts == 0 or infeasible_by_theorem(row["without"]):
+        return False  # (steer only: no impact-free plan exists at all; that is feasibility, reported as such)
     return w.rows < lower_bound(row)[0]
 
 
@@ -503,9 +503,9 @@ def notes(rows) -> list[str]:
             allv = [0.01 * abs(r["start"][4]) for r in sel]
             out.append(f"{LABEL[act].capitalize()}, minimum time: no plan found in {len(bad)} of {len(sel)} pairs, "
                        f"starting at {min(v):.3f}-{max(v):.3f} m/s (all pairs: {min(allv):.3f}-{max(allv):.3f} m/s); "
-                       "the witness family found no impact sequence that left the penny slow at the target (its "
-                       "closest approach is in the every-pair table), and the solver's zero and random starts found nothing either (not a proof of "
-                       "infeasibility)." if act == "steer" else "")
+                       "the witness family found no impact sequence that left the penny slow at the target (the every-pair "
+                       "table's witness column says which success condition its episodes never met), and the solver's "
+                       "zero and random starts found nothing either (not a proof of infeasibility)." if act == "steer" else "")
     return [x for x in out if x]
 
 
@@ -663,7 +663,9 @@ def write_report(rows, out, argv, seconds, meta):
     lines = header("Optimal control where impacts can pay", "training.impact_oc", argv)
     lines.insert(next(i for i, x in enumerate(lines) if x.startswith("- command:")) + 1,
                  f"- run: {seconds:.0f} s wall on {meta['workers']} worker process(es); {n_pairs} pairs per table "
-                 f"({', '.join(meta['scenes'])}), the same pairs for every actuation; seed {meta['seed']}")
+                 f"({', '.join(meta['scenes'])}), the same pairs for every actuation; seed {meta['seed']}"
+                 + (f"; this report rewritten on {meta['rewritten']} from the run's stored solves (--report-only)"
+                    if meta.get("rewritten") else ""))
     lines += [
         "Issue 20, item 5. The earlier study ([optimal_control_central.md](optimal_control_central.md): slow "
         "starts, central targets, 2 s horizons) found that impacts never help; its pairs gave impacts no "
@@ -715,8 +717,9 @@ def write_report(rows, out, argv, seconds, meta):
         lines.append(f"| {LABEL[s['actuation']]} | {s['objective']} | {s['scene']} | {s['pairs']} | "
                      f"{s['feasible_without']} | {s['without_failed']} | {s['feasible_with']} | {s['witnessed']} | "
                      f"{s['neither']} | {s['with_hits_wall']} | {s['pays']}/{s['pairs']} = {s['pays'] / s['pairs']:.2f} "
-                     f"[{lo:.2f}, {hi:.2f}] | {s['pays_both_feasible']}/{s['both_feasible']} | "
-                     f"{s['pays_only_with']} | {s['certified'] if s['objective'] == 'time' else '-'} | {gap} | "
+                     f"[{lo:.2f}, {hi:.2f}]{' (feasibility: T2)' if s['actuation'] == 'steer' else ''} | "
+                     f"{s['pays_both_feasible']}/{s['both_feasible']} | "
+                     f"{s['pays_only_with']} | {s['certified'] if s['objective'] == 'time' and s['actuation'] != 'steer' else '-'} | {gap} | "
                      f"{s['without_better']} | {s['from_witness']} |")
     if has_png:
         lines += ["", f"![where impacts pay]({png.name})", "",
@@ -740,8 +743,9 @@ def write_report(rows, out, argv, seconds, meta):
         if ob == "time":
             k, _ = lower_bound(r)
             lb = "none feasible" if k > 4000 else f"{k * r['with'].dt:.3g}"
-        verdict = "certified" if certified(r) else ("yes" if pays(r) else
-                                                    ("impact-free solve failed" if solve_failed(r["without"]) else "no"))
+        verdict = "certified" if certified(r) else (
+            "feasible only with impacts (T2)" if pays(r) and infeasible_by_theorem(r["without"]) else
+            "yes" if pays(r) else ("impact-free solve failed" if solve_failed(r["without"]) else "no"))
         lines.append(f"| {r['scene']} | {r['pair']} | {r['actuation']} | {ob} | {r['horizon']} | {wit} | "
                      f"{show(r['without'])} | {lb} | {show(r['with'])} | {r['with'].impacts if r['with'].ok else '-'} | "
                      f"{r['with_source'] or '-'} | {verdict} |")
@@ -808,6 +812,7 @@ def main(argv=None):
             raise SystemExit(f"no saved solves at {saved} (run without --report-only first)")
         with open(saved, "rb") as f:
             rows, seconds, meta, argv = pickle.load(f)
+        meta = dict(meta, rewritten=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()))
     else:
         t0 = time.perf_counter()
         rows = study(seed=args.seed, actuations=tuple(args.actuations), workers=args.workers, **settings)

@@ -383,7 +383,7 @@ def _answer_block(out) -> list[str]:
 
     stored = out.with_name("billiards_answer.json")
     if stored.is_file():
-        return [README_BEGIN, answer_block(json.loads(stored.read_text())), README_END]
+        return [README_BEGIN, answer_block(json.loads(stored.read_text()), base=""), README_END]
     old = out.read_text() if out.is_file() else ""
     if README_BEGIN in old and README_END in old:
         return [README_BEGIN + old.split(README_BEGIN, 1)[1].split(README_END, 1)[0].rstrip("\n"), README_END]
