@@ -1,6 +1,8 @@
 """Trajectory optimisation with and without impacts (training/optimal_control.py)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -251,23 +253,81 @@ def test_pays_needs_a_wall_hit_and_the_margin():
     def sol(rows, impacts, ok=True):
         return oc.Solution("optimal" if ok else "failed: x", rows, 0.1, np.zeros((rows, 2)), impacts, 0.0, 0.05, 0.0)
 
-    def row(w, wo):
-        return {"objective": "time", "with": w, "without": wo}
+    start, target = io.draw_pairs("ellipse", 1, seed=0)[0]
+
+    def row(w, wo, scene="ellipse"):
+        return {"objective": "time", "with": w, "without": wo, "scene": scene, "task": "reach", "start": start,
+                "target": target, "pair": 0}
     assert io.pays(row(sol(10, 1), sol(20, 0)))
     assert not io.pays(row(sol(10, 0), sol(20, 0)))          # better, but without touching the wall
     assert not io.pays(row(sol(20, 1), sol(20, 0)))          # no gain
     assert not io.pays(row(sol(39, 1), sol(40, 0)))          # 2.5 %: within the 5 % margin
-    assert io.pays(row(sol(39, 1), sol(0, 0, ok=False)))     # only feasible with the impact
+    assert not io.pays(row(sol(39, 1), sol(0, 0, ok=False)))  # the impact-free solver failed: not evidence
+    t2 = oc.Solution("infeasible (T2): without impacts |R theta_dot| stays 0.05 m/s > 0.01", 0, math.nan,
+                     np.zeros((0, 2)), 0, math.nan, 0.05, 0.0)
+    assert io.pays(row(sol(39, 1), t2))                      # no impact-free plan exists (theorem)
     assert not io.pays(row(sol(0, 0, ok=False), sol(0, 0, ok=False)))
-    rows = [dict(row(sol(10, 1), sol(20, 0)), scene="ellipse", actuation="drive", witness={"certified": True},
+    rows = [dict(row(sol(10, 1), sol(20, 0)), actuation="drive", witness={"certified": True},
                  with_source="witness") for _ in range(3)]
-    rows.append(dict(row(sol(20, 0), sol(20, 0)), scene="stadium", actuation="drive", witness={"certified": False},
+    rows.append(dict(row(sol(20, 0), sol(20, 0), "stadium"), actuation="drive", witness={"certified": False},
+                     with_source="zero"))
+    rows.append(dict(row(sol(12, 2), sol(0, 0, ok=False)), actuation="drive", witness={"certified": False},
                      with_source="zero"))
     pooled = [s for s in io.summarise(rows) if s["scene"] == "all"][0]
     from training.study_report import clopper_pearson
-    assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (4, 3, 3, 3)
-    assert pooled["ci"] == clopper_pearson(3, 4) and pooled["mean_gap"] == pytest.approx(0.5)
-    assert "impacts pay in 3 of 4 pairs" in io.answer([pooled])[0]
+    assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (5, 3, 3, 3)
+    assert (pooled["without_failed"], pooled["only_with_failed"]) == (1, 1)
+    assert pooled["ci"] == clopper_pearson(3, 5) and pooled["mean_gap"] == pytest.approx(0.5)
+    line = io.answer([pooled])[0]
+    assert "impacts pay in 3 of 5 pairs" in line and "impact-free solve failed in 1 pairs" in line
+    assert "**certified** in" in line
+
+
+def test_certified_lower_bounds_hold_for_impact_free_plans():
+    """training/oc_bounds.py: no impact-free plan reaches the terminal set in fewer rows than rows_lower_bound.
+    Checked on the simulator from the impact study's starts with random plans whose target is put on their own path
+    (reach: the contact point at a random row; park: the rest point after braking to theta_dot = 0 exactly, then a
+    rest-to-rest roll), drive only and both controls: the first row whose end is in the set is never before the
+    bound. The tent integral is the formula's."""
+    from training import impact_oc as io
+    from training.oc_bounds import rows_lower_bound, tent_distance
+
+    assert tent_distance(2.0, math.inf, 40.0, 0.1) == pytest.approx(2.0 * 0.1 + 0.5 * 40 * 0.01)
+    assert tent_distance(10.0, 1.0, 40.0, 0.1) == -math.inf  # cannot brake from 10 to 1 rad/s in 0.1 s
+    assert tent_distance(1.0, 1.0, 40.0, 0.5) == pytest.approx(2 * (1.0 * 0.25 + 0.5 * 40 * 0.25 ** 2))
+    rng = np.random.default_rng(9)
+    checked, tight = 0, 0
+    for scene in io.SCENES:
+        for start, _ in io.draw_pairs(scene, 6, seed=11):
+            start = start.copy()
+            start[3] += math.pi  # heading into the table: the random plans below then rarely reach the wall
+            for actuation, task in (("drive", "reach"), ("both", "reach"), ("both", "park")):
+                base = oc.Problem(scene, task, start, start[:2], impacts=True, actuation=actuation)
+                a2 = base.limits[1] / base.params.rolling_inertia
+                for _ in range(4):
+                    v = rng.uniform(-1, 1, (20, 2)) * (base.limits > 0)
+                    if task == "park":  # brake exactly, then a rest-to-rest roll, steering at random
+                        n = math.ceil(abs(start[4]) / (a2 * base.dt))
+                        v[:n, 1] = -start[4] / (n * base.dt * a2)
+                        c = rng.uniform(0.2, 1.0)
+                        v[n:n + 3, 1], v[n + 3:n + 6, 1], v[n + 6:, 1] = c, -c, 0.0
+                    u = v * base.limits[None, :]
+                    tr = oc.pe.simulate(start, params=base.params, table=base.table, law=base.law, controls=u,
+                                        control_dt=base.dt)
+                    if tr.n_impacts:
+                        continue  # not an impact-free plan
+                    ends = tr.states_at(base.dt * np.arange(1, len(v) + 1))
+                    k = len(v) - 1 if task == "park" else int(rng.integers(3, len(v)))
+                    if not float(base.table.h(*ends[k, :2])) < -base.params.R:
+                        continue  # (a target the problem refuses: within R of the wall)
+                    prob = oc.Problem(scene, task, start, ends[k, :2], impacts=True, actuation=actuation)
+                    hit = np.flatnonzero(io.in_set(prob, ends))
+                    assert hit.size and hit[0] <= k
+                    K_lb, _ = rows_lower_bound(prob, actuation)
+                    assert hit[0] + 1 >= K_lb, (scene, actuation, task, hit[0] + 1, K_lb)
+                    checked += 1
+                    tight += K_lb > 1
+    assert checked > 40 and tight > 20
 
 
 def test_impact_pairs_start_fast_near_the_wall_with_targets_near_it():
@@ -322,7 +382,7 @@ def test_impact_quick_run_writes_outside_docs(tmp_path):
         assert f"| {act} | time | all | 1 |" in text
     assert "- sources: sha256" in text and "Clopper-Pearson" in text and (tmp_path / "rows.pkl").is_file()
     # the steer pair: infeasible without impacts by T2, feasible with them (the witness certifies it)
-    assert "| steer only, park | time | all | 1 | 0 | 1 | 1 | 0 | 1 | 1/1" in text
+    assert "| steer only, park | time | all | 1 | 0 | 0 | 1 | 1 | 0 | 1 | 1/1 = 1.00 [0.03, 1.00] (feasibility: T2)" in text
     again = io.main(["--quick", "--report-only", "--out", str(tmp_path / "oc.md")]).read_text()
     assert again.split("## Answer")[1] == text.split("## Answer")[1]
     with pytest.raises(SystemExit, match="never writes into docs"):

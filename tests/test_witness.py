@@ -69,6 +69,71 @@ def test_witness_on_the_plane_fails_with_the_theorem_as_reason():
     assert not r.witnessed and "theorem T3" in r.reason
 
 
+def test_witness_command_on_a_cell_a_theorem_excludes(capsys):
+    """The issue's cell: steering only on a circle of radius 0.5 m with e = 0.5 walls. Theorem T2.5 (with the first
+    impact's time) excludes the whole cell and each pair; each failure line says which condition failed (the
+    penny passes within 0.002 m of the target but never slowly: speed) and cites the theorem with its numbers."""
+    wt.main(["PennyProbeSteer-Stadium-Elastic-v0", "--pairs", "2", "table={kind: circle, r: 0.5}", "law=0.5"])
+    out = capsys.readouterr().out
+    assert "witnessed 0/2 pairs; 2/2 impossible (theorem T2.5)" in out
+    assert "the whole cell: impossible (theorem T2.5) on speed and time" in out and "0.202 m of the wall" in out
+    lines = [x for x in out.splitlines() if x.startswith("  seed ")]
+    assert len(lines) == 2
+    for line in lines:
+        assert "impossible (theorem T2.5) on speed and time" in line
+        assert "position met" in line and "but speed never" in line
+
+
+def test_witness_on_a_cell_a_theorem_excludes_in_part():
+    """A circle of radius 0.35 m: T2.5 excludes the pair of seed 2 (its target is too far from the wall for the time
+    left after the first impact) but not that of seed 0; both lines say which success condition was never met."""
+    w = wt.Witness("PennyProbeSteer-Stadium-Elastic-v0", {"table": {"kind": "circle", "r": 0.35}, "law": 0.5})
+    try:
+        r0, r2 = w.pair(0), w.pair(2)
+    finally:
+        w.close()
+    assert r0.theorem == "" and r2.theorem == "T2.5"
+    assert not r2.witnessed and r2.reason.startswith("impossible (theorem T2.5) on speed and time")
+    for r in (r0, r2):
+        assert r.witnessed or any(k in r.reason for k in ("position never met", "but speed never", "but spin never"))
+
+
+def test_witness_failure_lines_name_the_failed_condition():
+    """why(): position (closest approach >= tolerance), speed (within it, never slower than speed_tolerance), spin
+    (within it and slow, never under spin_tolerance); the time limit searched; a theorem where one covers the pair."""
+    from penny_env.analysis.controllability_theorems import theorem_for
+
+    w = wt.Witness("PennyProbeSteer-Ellipse-Elastic-v0")
+    try:
+        base = {"any_hit": True, "max_w_after_hit": 1.0, "steps": 400}
+        far = w.why({**base, "best_d": 0.05, "slowest_within": np.inf, "calmest": np.inf})
+        assert "position never met: closest approach 0.050 m >= tolerance 0.02 m" in far and "20 s" in far
+        fast = w.why({**base, "best_d": 0.001, "slowest_within": 0.03, "calmest": np.inf})
+        assert "position met (closest approach 0.0010 m < tolerance 0.02 m) but speed never" in fast
+        assert "0.0300 m/s >= speed_tolerance 0.01 m/s" in fast
+        spin = w.why({**base, "best_d": 0.001, "slowest_within": 0.001, "calmest": 0.9})
+        assert "spin never" in spin and "0.9 rad/s >= spin_tolerance 0.5 rad/s" in spin
+        thm = theorem_for("PennyProbeSteer-Plane-v0")
+        cited = w.why({**base, "best_d": 0.001, "slowest_within": 0.03, "calmest": np.inf}, thm)
+        assert cited.startswith("impossible (theorem T2.3) on speed: ") and "but speed never" in cited
+    finally:
+        w.close()
+
+
+def test_a_witness_on_an_excluded_pair_stops_the_run(monkeypatch):
+    """A witnessed pair that a theorem excludes is a contradiction: Witness.pair raises instead of counting it."""
+    from penny_env.analysis.controllability_theorems import theorem_for
+
+    fake = theorem_for("PennyProbeSteer-Plane-v0")
+    monkeypatch.setattr(wt.Witness, "theorem", lambda self, state, target: fake)
+    w = wt.Witness("PennyProbeDrive-Ellipse-Elastic-v0")
+    try:
+        with pytest.raises(wt.TheoremContradiction, match="T2.3"):
+            w.pair(0)
+    finally:
+        w.close()
+
+
 def test_witness_command_prints_the_count(capsys):
     wt.main(["PennyProbeDrive-Ellipse-Elastic-v0", "--pairs", "1", "table=circle", "law=0.5"])
     out = capsys.readouterr().out
@@ -124,6 +189,13 @@ def test_verdict_rules():
         cell_verdict("Steer", "circle", 31, 30)
     with pytest.raises(TypeError, match="witnessed"):
         cell_verdict("Steer", "circle", 1.5, 30)
+    # pairs a theorem excludes in a cell it does not decide as a whole
+    assert cell_verdict("Steer", "circle_r0.35", 3, 40, "0.5", 21, "T2.5") == \
+        "possible (witnessed 3/40; 21/40 impossible, theorem T2.5)"
+    assert cell_verdict("Steer", "circle_r0.35", 0, 40, "0.5", 21, "T2.5") == "open (21/40 impossible, theorem T2.5)"
+    assert cell_verdict("Steer", "circle_r0.5", 0, 5, "0.5", 5, "T2.5") == "impossible (theorem T2.5)"
+    with pytest.raises(ValueError, match="excluded"):
+        cell_verdict("Steer", "circle", 30, 30, "elastic", 1, "T2.5")
 
 
 def test_learnability_is_the_share_of_the_witnessed_rate():
@@ -191,10 +263,13 @@ def test_witness_study_quick_writes_only_its_folder(tmp_path):
     by = {(c["probe"], c["table"]): c for c in cells}
     assert by[("Drive", "plane")]["verdict"] == "impossible (theorem T3.2)"
     assert by[("Drive", "ellipse")]["verdict"].startswith("possible (witnessed")
+    assert by[("Steer", "circle_r0.5")]["verdict"] == "impossible (theorem T2.5)"  # an override cell
     text = (tmp_path / "witnesses.md").read_text()
     assert "## The verdict" in text and "theorem T3" in text and "witnessed" in text
+    assert "Circle r = 0.5 m" in text and "2/2 (T2.5)" in text
     with open(tmp_path / "witnesses_pairs.csv") as f:
-        assert len(list(csv.DictReader(f))) == 6
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 8 and {r["theorem"] for r in rows if r["table"] == "circle_r0.5"} == {"T2.5"}
     assert {p: p.stat().st_mtime_ns for p in (ROOT / "docs").glob("witnesses*")} == docs_before
     assert (ROOT / "README.md").read_text() == readme_before
     # --report-only rewrites the same verdicts from the CSVs
@@ -213,8 +288,11 @@ def test_readme_answer_is_the_verdict_tables():
     cells_csv = ROOT / "docs" / "witnesses.csv"
     assert cells_csv.is_file(), "docs/witnesses.csv (the committed witness study) is missing"
     cells = ws.read_csv(cells_csv)
+    pairs = ws.read_csv(ROOT / "docs" / "witnesses_pairs.csv")
     for c in cells:
-        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]))
+        ex, by = ws.excluded_of([r for r in pairs if ws._key(r) == ws._key(c)])
+        assert (ex, by) == (int(c["excluded"]), c["excluded_by"])
+        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"], ex, by)
     block = text.split(ws.README_BEGIN, 1)[1].split(ws.README_END, 1)[0].strip()
     assert block == ws.readme_answer(cells, ws.study_rl(ROOT / "docs" / "study.csv"))
     # every probe x table x law cell was run

@@ -46,11 +46,15 @@ set), so that a plan with impacts that starts slower than the impact-free optimu
 Steer only, whose horizons reach hundreds of rows through many impacts, uses fewer and shorter solves
 (``STEER_SOLVER``). Minimum effort: the best of the starts at EFFORT_ROWS rows.
 
-Impacts pay on a pair when the best solution with impacts hits the wall and beats the best without by more
-than ``MARGIN`` (relative), or when only the solve with impacts was feasible and it hits the wall. Both are
-local searches: "beats" shows a better plan with impacts; no gap does not prove that none exists, and a
-pair infeasible in both is reported as such ("neither"), never dropped. The open plane is not studied: it
-has no wall, so no impact can happen there and both variants are the same problem.
+Impacts pay on a pair when the best solution with impacts hits the wall and beats the best impact-free plan
+found by more than ``MARGIN`` (relative), or when no impact-free plan exists by theorem (steer only: T2). A
+solver failure of the impact-free search is not evidence: such pairs are counted in their own column ("impact-free
+solve failed"), never as paying. Both are local searches: "beats" shows a better plan with impacts; no gap does
+not prove that none exists, and a pair infeasible in both is reported as such ("neither"), never dropped.
+Certified (minimum time): the plan with impacts reaches the set in fewer rows than the lower bound of
+training/oc_bounds.py allows every impact-free plan (a bound from the torque limits, the start's speeds and the
+distance), so it beats every impact-free plan, found or not. The open plane is not studied: it has no wall, so
+no impact can happen there and both variants are the same problem.
 """
 from __future__ import annotations
 
@@ -354,16 +358,43 @@ def solve_pair(job):
     return rows
 
 
+def infeasible_by_theorem(sol) -> bool:
+    """The impact-free variant has no plan at all by a theorem (steer only: T2), as opposed to a solver failure."""
+    return sol.status.startswith("infeasible (T")
+
+
+def solve_failed(sol) -> bool:
+    return sol.status.startswith("failed")
+
+
 def pays(row, margin=MARGIN):
-    """Impacts pay on this row: the best with impacts hits the wall and beats the best without by more than
-    margin (relative), or only the solve with impacts found a feasible plan and it hits the wall."""
+    """Impacts pay on this row: the best with impacts hits the wall and beats the best impact-free plan found by more
+    than margin (relative), or no impact-free plan exists by theorem. A failed impact-free solve never counts."""
     w, wo = row["with"], row["without"]
     if not w.ok or w.impacts == 0:
         return False
-    if not wo.ok:
+    if infeasible_by_theorem(wo):
         return True
+    if not wo.ok:
+        return False
     a, b = value(w, row["objective"]), value(wo, row["objective"])
     return a < (1.0 - margin) * b
+
+
+def lower_bound(row):
+    """(rows, reason) of training/oc_bounds.rows_lower_bound for the row's impact-free problem (minimum time)."""
+    from training.oc_bounds import rows_lower_bound
+    prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True, actuation=row["actuation"])
+    return rows_lower_bound(prob, row["actuation"])
+
+
+def certified(row) -> bool:
+    """Minimum time: the plan with impacts hits the wall and needs fewer rows than every impact-free plan can
+    (the certified lower bound; for steer only, no impact-free plan exists)."""
+    w = row["with"]
+    if row["objective"] != "time" or not w.ok or w.impacts == 0 or infeasible_by_theorem(row["without"]):
+        return False  # (steer only: no impact-free plan exists at all; that is feasibility, reported as such)
+    return w.rows < lower_bound(row)[0]
 
 
 # -- the study ------------------------------------------------------------------------------------------
@@ -444,13 +475,17 @@ def summarise(rows, margin=MARGIN):
         lo, hi = clopper_pearson(k, n)
         out.append({"actuation": act, "objective": ob, "scene": sc, "pairs": n,
                     "witnessed": sum(r["witness"]["certified"] for r in sel),
+                    "without_failed": sum(solve_failed(r["without"]) for r in sel),
+                    "only_with_failed": sum(r["with"].ok and r["with"].impacts > 0 and solve_failed(r["without"])
+                                            for r in sel),
+                    "certified": sum(certified(r) for r in sel),
                     "feasible_without": sum(r["without"].ok for r in sel),
                     "feasible_with": sum(r["with"].ok for r in sel),
                     "neither": sum(not r["with"].ok and not r["without"].ok for r in sel),
                     "with_hits_wall": sum(r["with"].ok and r["with"].impacts > 0 for r in sel),
                     "pays": k, "ci": (lo, hi),
                     "pays_both_feasible": sum(pays(r, margin) for r in both), "both_feasible": len(both),
-                    "pays_only_with": sum(pays(r, margin) for r in sel if not r["without"].ok),
+                    "pays_only_with": sum(pays(r, margin) for r in sel if infeasible_by_theorem(r["without"])),
                     "mean_gap": float(np.mean(gaps)) if gaps else math.nan,
                     "without_better": sum(value(r["without"], ob) < (1 - margin) * value(r["with"], ob) for r in both),
                     "from_witness": sum(r["with"].ok and r["with_source"].startswith("witness") for r in sel)})
@@ -468,13 +503,51 @@ def notes(rows) -> list[str]:
             allv = [0.01 * abs(r["start"][4]) for r in sel]
             out.append(f"{LABEL[act].capitalize()}, minimum time: no plan found in {len(bad)} of {len(sel)} pairs, "
                        f"starting at {min(v):.3f}-{max(v):.3f} m/s (all pairs: {min(allv):.3f}-{max(allv):.3f} m/s); "
-                       "the witness family found no impact sequence that left the penny slow at the target (its "
-                       "closest approach is in the every-pair table), and the solver's zero and random starts found nothing either (not a proof of "
-                       "infeasibility)." if act == "steer" else "")
+                       "the witness family found no impact sequence that left the penny slow at the target (the every-pair "
+                       "table's witness column says which success condition its episodes never met), and the solver's "
+                       "zero and random starts found nothing either (not a proof of infeasibility)." if act == "steer" else "")
     return [x for x in out if x]
 
 
 LABEL = {"both": "both controls, park", "steer": "steer only, park", "drive": "drive only, reach"}
+
+
+README_BEGIN = "<!-- oc-answer: written by python -m training.impact_oc -->"
+README_END = "<!-- /oc-answer -->"
+
+
+def readme_block(summary, margin=MARGIN) -> str:
+    """The README's answer: per actuation and objective the paying, failed and certified counts (from the summary)."""
+    bits = []
+    for s in summary:
+        if s["scene"] != "all":
+            continue
+        lo, hi = s["ci"]
+        if s["actuation"] == "steer":
+            bits.append(f"steer-only park: no impact-free plan exists (theorem T2), a plan with impacts was found in "
+                        f"{s['feasible_with']}/{s['pairs']} pairs (feasibility, not optimality)")
+            continue
+        cert = f", certified in {s['certified']}" if s["objective"] == "time" else ""
+        bits.append(f"{LABEL[s['actuation']]}, minimum {s['objective']}: impacts pay in {s['pays']}/{s['pairs']} "
+                    f"(exact 95 % interval {lo:.2f} to {hi:.2f}){cert}, the impact-free solve failed in "
+                    f"{s['without_failed']}")
+    n = summary[0]["pairs"] if summary else 0
+    return (f"On the elastic ellipse and stadium ({n} pairs per actuation and objective), the best plan with impacts "
+            f"hits the wall and beats the best impact-free plan found by more than {100 * margin:.0f} %: "
+            + "; ".join(bits) + ". Failed impact-free solves are a column of their own, never counted as paying. "
+            "Certified: the plan with impacts reaches the target in fewer control steps than a lower bound "
+            "(training/oc_bounds.py) allows any impact-free plan. The searches are local: a paying pair shows that a "
+            "better plan with impacts exists, not that none without does, and no plan is shown optimal.")
+
+
+def update_readme(readme: Path, block: str) -> bool:
+    text = readme.read_text()
+    if README_BEGIN not in text or README_END not in text:
+        return False
+    head, rest = text.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    readme.write_text(f"{head}{README_BEGIN}\n{block}\n{README_END}{tail}")
+    return True
 
 
 def answer(summary, margin=MARGIN) -> list[str]:
@@ -483,15 +556,46 @@ def answer(summary, margin=MARGIN) -> list[str]:
         if s["scene"] != "all":
             continue
         lo, hi = s["ci"]
+        if s["actuation"] == "steer":
+            lines.append(
+                f"- {LABEL[s['actuation']].capitalize()}, minimum {s['objective']}: feasibility, not optimality. No "
+                f"impact-free plan exists (theorem T2: theta_dot is conserved without impacts), so every feasible plan "
+                f"uses impacts: a plan with impacts was found in {s['feasible_with']} of {s['pairs']} pairs (witness "
+                f"episodes in {s['witnessed']}), none in {s['neither']}; the plans found are not shown optimal.")
+            continue
+        cert = (f"; **certified** in {s['certified']} of {s['pairs']} (the plan with impacts needs fewer rows than the "
+                "lower bound of every impact-free plan)" if s["objective"] == "time" else
+                "; no certificate (no lower bound on the effort of impact-free plans is computed)")
         lines.append(
             f"- {LABEL[s['actuation']].capitalize()}, minimum {s['objective']}: impacts pay in {s['pays']} of "
             f"{s['pairs']} pairs ({100 * s['pays'] / s['pairs']:.0f} %, 95 % exact interval "
             f"[{100 * lo:.0f} %, {100 * hi:.0f} %]): the best plan found with impacts hits the wall and is more than "
-            f"{100 * margin:.0f} % better than the best without in {s['pays_both_feasible']} of the "
-            f"{s['both_feasible']} pairs feasible both ways, and is the only feasible plan found in "
-            f"{s['pays_only_with']}; feasible without impacts {s['feasible_without']}, with impacts "
-            f"{s['feasible_with']} (witness-certified {s['witnessed']}), neither {s['neither']}.")
+            f"{100 * margin:.0f} % better than the best impact-free plan found, among the {s['both_feasible']} pairs "
+            f"with both found{cert}. The impact-free solve failed in {s['without_failed']} pairs (its own column, "
+            f"never counted as paying; in {s['only_with_failed']} of them a plan with impacts was found); feasible "
+            f"without impacts {s['feasible_without']}, with impacts {s['feasible_with']} (witness episodes "
+            f"{s['witnessed']}), neither {s['neither']}.")
     return lines
+
+
+def certificates(rows) -> list[str]:
+    """Lines: the minimum-time pairs whose plan with impacts beats the certified lower bound of every impact-free plan
+    (both controls, drive only), or why none was found."""
+    found = []
+    for r in rows:
+        if r["actuation"] == "steer" or r["objective"] != "time" or not r["with"].ok or r["with"].impacts == 0:
+            continue
+        k, why = lower_bound(r)
+        if r["with"].rows < k:
+            found.append(f"  - {r['scene']} pair {r['pair']}, {LABEL[r['actuation']]}: with impacts "
+                         f"{r['with'].rows * r['with'].dt:.3g} s ({r['with'].impacts} impacts); every impact-free plan "
+                         f"needs at least {k * r['with'].dt:.3g} s ({why})")
+    if found:
+        return ["Pairs where the plan with impacts is certified better than every impact-free plan (minimum time):",
+                *found]
+    return ["No pair where the plan with impacts beats the certified lower bound of every impact-free plan: the bound "
+            "(distance and end speed at the rolling torque limit) is below the time of the plans with impacts found "
+            "on every pair."]
 
 
 def plot_examples(rows, path, n=4):
@@ -559,7 +663,9 @@ def write_report(rows, out, argv, seconds, meta):
     lines = header("Optimal control where impacts can pay", "training.impact_oc", argv)
     lines.insert(next(i for i, x in enumerate(lines) if x.startswith("- command:")) + 1,
                  f"- run: {seconds:.0f} s wall on {meta['workers']} worker process(es); {n_pairs} pairs per table "
-                 f"({', '.join(meta['scenes'])}), the same pairs for every actuation; seed {meta['seed']}")
+                 f"({', '.join(meta['scenes'])}), the same pairs for every actuation; seed {meta['seed']}"
+                 + (f"; this report rewritten on {meta['rewritten']} from the run's stored solves (--report-only)"
+                    if meta.get("rewritten") else ""))
     lines += [
         "Issue 20, item 5. The earlier study ([optimal_control_central.md](optimal_control_central.md): slow "
         "starts, central targets, 2 s horizons) found that impacts never help; its pairs gave impacts no "
@@ -583,8 +689,15 @@ def write_report(rows, out, argv, seconds, meta):
         "## Answer (computed from the table below)", "", *answer(summary), "",
         "Both searches are local (multi-start SLSQP): a pair where impacts pay shows a plan with impacts that beats "
         "every plan found without; the shares are lower bounds of the shares in the problem distribution only in "
-        "so far as the impact-free searches found the impact-free optima. Steer only: without impacts the task is "
-        "infeasible by theorem T2 (theta_dot is conserved), so every feasible plan there uses impacts.", "",
+        "so far as the impact-free searches found the impact-free optima. Certified pairs do not depend on that: "
+        "their plan with impacts reaches the set in fewer rows than any impact-free plan can (training/oc_bounds.py: "
+        "both controls, the rolling speed bounded by its start and the torque limit, and for a park brought below "
+        "v_tol by the end; drive only, the heading turning at its constant rate, the displacement along the target's "
+        "direction bounded by a linear program solved in closed form). No pair is certified optimal: the plans "
+        "with impacts are local optima, and no lower bound on plans with impacts is computed. Steer only: without "
+        "impacts the task is infeasible by theorem T2 (theta_dot is conserved), so every feasible plan there uses "
+        "impacts (feasibility, not optimality).", "",
+        *certificates(rows), "",
         *notes(rows), "",
         "## Per actuation and table", "",
         "Pairs; feasible without / with impacts (a verified plan found); with impacts certified by the witness's "
@@ -594,18 +707,20 @@ def write_report(rows, out, argv, seconds, meta):
         "better by the margin; best plan with impacts that came from the witness's start. For minimum effort the "
         "witness certifies the task within its own episode, which is often longer than the effort horizon, not "
         "within that horizon.", "",
-        "| actuation | objective | table | pairs | feasible without | feasible with | witnessed | neither | "
-        "with hits the wall | impacts pay [95 % CI] | pay, both feasible | pay, only with | mean gain | "
-        "without better | best from witness |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
+        "| actuation | objective | table | pairs | feasible without | impact-free solve failed | feasible with | "
+        "witnessed | neither | with hits the wall | impacts pay [95 % CI] | pay, both feasible | pay, no impact-free "
+        "plan (theorem) | certified (time) | mean gain | without better | best from witness |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
     for s in summary:
         lo, hi = s["ci"]
         gap = "-" if math.isnan(s["mean_gap"]) else f"{100 * s['mean_gap']:.0f} %"
         lines.append(f"| {LABEL[s['actuation']]} | {s['objective']} | {s['scene']} | {s['pairs']} | "
-                     f"{s['feasible_without']} | {s['feasible_with']} | {s['witnessed']} | {s['neither']} | "
-                     f"{s['with_hits_wall']} | {s['pays']}/{s['pairs']} = {s['pays'] / s['pairs']:.2f} "
-                     f"[{lo:.2f}, {hi:.2f}] | {s['pays_both_feasible']}/{s['both_feasible']} | "
-                     f"{s['pays_only_with']} | {gap} | {s['without_better']} | {s['from_witness']} |")
+                     f"{s['feasible_without']} | {s['without_failed']} | {s['feasible_with']} | {s['witnessed']} | "
+                     f"{s['neither']} | {s['with_hits_wall']} | {s['pays']}/{s['pairs']} = {s['pays'] / s['pairs']:.2f} "
+                     f"[{lo:.2f}, {hi:.2f}]{' (feasibility: T2)' if s['actuation'] == 'steer' else ''} | "
+                     f"{s['pays_both_feasible']}/{s['both_feasible']} | "
+                     f"{s['pays_only_with']} | {s['certified'] if s['objective'] == 'time' and s['actuation'] != 'steer' else '-'} | {gap} | "
+                     f"{s['without_better']} | {s['from_witness']} |")
     if has_png:
         lines += ["", f"![where impacts pay]({png.name})", "",
                   "Pairs where impacts pay (the first of each actuation): the contact point's path of the best plan "
@@ -615,8 +730,8 @@ def write_report(rows, out, argv, seconds, meta):
     lines += ["", "## Every pair", "",
               "Times in s, effort as mean (u / limit)^2; the start the best plan with impacts came from; failures "
               "with their reasons.", "",
-              "| table | pair | actuation | objective | horizon | witness | without impacts | with impacts | "
-              "impacts | best from | pays |", "|---|---:|---|---|---:|---|---|---|---:|---|---|"]
+              "| table | pair | actuation | objective | horizon | witness | without impacts | impact-free lower bound "
+              "[s] | with impacts | impacts | best from | pays |", "|---|---:|---|---|---:|---|---|---:|---|---:|---|---|"]
     for r in sorted(rows, key=lambda r: (r["scene"], r["pair"], ACTUATIONS.index(r["actuation"]), r["objective"])):
         ob = r["objective"]
 
@@ -624,9 +739,16 @@ def write_report(rows, out, argv, seconds, meta):
             return f"{value(sol, ob):.3g}" if sol.ok else sol.status.replace("|", "\\|")
         wit = (f"{r['witness']['steps']} steps, {r['witness']['impacts']} impacts" if r["witness"]["certified"]
                else r["witness"]["reason"].replace("|", "/"))
+        lb = "-"
+        if ob == "time":
+            k, _ = lower_bound(r)
+            lb = "none feasible" if k > 4000 else f"{k * r['with'].dt:.3g}"
+        verdict = "certified" if certified(r) else (
+            "feasible only with impacts (T2)" if pays(r) and infeasible_by_theorem(r["without"]) else
+            "yes" if pays(r) else ("impact-free solve failed" if solve_failed(r["without"]) else "no"))
         lines.append(f"| {r['scene']} | {r['pair']} | {r['actuation']} | {ob} | {r['horizon']} | {wit} | "
-                     f"{show(r['without'])} | {show(r['with'])} | {r['with'].impacts if r['with'].ok else '-'} | "
-                     f"{r['with_source'] or '-'} | {'yes' if pays(r) else 'no'} |")
+                     f"{show(r['without'])} | {lb} | {show(r['with'])} | {r['with'].impacts if r['with'].ok else '-'} | "
+                     f"{r['with_source'] or '-'} | {verdict} |")
     lines += ["", "## What waits", "",
               "- A plan with the impact count fixed per mode (multiple shooting with one segment per impact-free "
               "arc and the impact as a switching constraint) is not built: the multi-start above reaches different "
@@ -690,6 +812,7 @@ def main(argv=None):
             raise SystemExit(f"no saved solves at {saved} (run without --report-only first)")
         with open(saved, "rb") as f:
             rows, seconds, meta, argv = pickle.load(f)
+        meta = dict(meta, rewritten=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()))
     else:
         t0 = time.perf_counter()
         rows = study(seed=args.seed, actuations=tuple(args.actuations), workers=args.workers, **settings)
@@ -698,8 +821,11 @@ def main(argv=None):
         with open(saved, "wb") as f:
             pickle.dump((rows, seconds, meta, argv), f)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_report(rows, out, argv, seconds, meta)
+    summary = write_report(rows, out, argv, seconds, meta)
     print(f"wrote {out}")
+    if not args.quick and out.resolve() == (docs / "optimal_control.md").resolve():
+        if update_readme(ROOT / "README.md", readme_block(summary)):
+            print("README.md: the optimal-control answer updated")
     return out
 
 

@@ -9,7 +9,12 @@ the probe's own start/target distribution) a small family of parametrised state-
 step, bitwise the single env's). The first candidate whose episode ends with success is then run as a
 controller in the real episode (gymnasium.make of the id, reset with the pair's seed) and the pair counts
 as witnessed only if that episode ends with ``info["is_success"]``. The command prints
-"witnessed k/N pairs" and, per pair not witnessed, why.
+"witnessed k/N pairs" and, per pair not witnessed, why: which success condition the searched episodes never
+met (position: the target within the tolerance; speed: at rest there, |R theta_dot| under speed_tolerance and
+|phi_dot| under spin_tolerance; time: within the episode's time limit) and, where a theorem of
+docs/controllability_theory.md covers the pair (penny_env.analysis.controllability_theorems.pair_theorem, which
+reads the cell's table, regions, time limit and speeds), "impossible (theorem Tk)" with the theorem's numbers.
+A pair that a theorem excludes is still searched: a witness there would contradict the theorem, and stops the run.
 
 Families (``FAMILIES``; the controllers read the exact state, which a witness may):
 
@@ -198,6 +203,17 @@ class PairResult:
     impacts: int = 0
     params: tuple = ()
     actions: list = field(default_factory=list, repr=False)
+    theorem: str = ""  # the id of the theorem that makes the pair impossible ("T2.5"), or ""
+
+
+def theorem_line(thm) -> str:
+    """'impossible (theorem T2.5) on speed and time: <the theorem's numbers>' (the conditions it rules out)."""
+    return f"{thm.label} on {' and '.join(thm.conditions) or 'every condition'}: {thm.reason}"
+
+
+class TheoremContradiction(RuntimeError):
+    """A witness episode succeeded on a pair that a theorem declares impossible: the simulator, the witness or
+    the theorem's premises are wrong. Never caught by the study: it stops the run."""
 
 
 class Witness:
@@ -216,60 +232,104 @@ class Witness:
         self.vec = gym.make_vec(env_id, num_envs=len(self.cands), vectorization_mode="vector_entry_point",
                                 max_episode_steps=self.max_steps, **self.overrides)
         self.plane = self.core.plane
+        self.scene, self.task = self.core.scene, self.core.task
 
     def close(self):
         self.env.close()
         self.vec.close()
 
     def search(self, state, target):
-        """(index of the first candidate that succeeded or None, diagnostics) from the pair's start."""
+        """(index of the first candidate that succeeded or None, diagnostics) from the pair's start. The
+        diagnostics say how close the candidates came to each success condition: best_d, the closest approach;
+        slowest_within, the lowest |R theta_dot| at a step end within the tolerance (park); calmest, the lowest
+        |phi_dot| at a step end within the tolerance and under speed_tolerance (park with spin_tolerance)."""
         vec = self.vec.unwrapped if hasattr(self.vec, "unwrapped") else self.vec
         K = len(self.cands)
         obs, _ = vec.reset(options={"state": np.tile(state, (K, 1)), "target": np.tile(target, (K, 1))})
         ctrl = self.family(self.core, self.cands)
         impacts = np.zeros(K, np.int64)
-        best_d = np.inf
-        max_w_after_hit = 0.0
+        tol, vtol = self.task.tolerance, self.task.speed_tolerance
+        diag = {"best_d": np.inf, "any_hit": False, "max_w_after_hit": 0.0, "slowest_within": np.inf,
+                "calmest": np.inf, "steps": 0}
         hits = np.zeros(K, np.int64)
-        for _ in range(self.max_steps):
+        live = np.ones(K, bool)  # rows whose episode has not ended (an ended row is reset by the vector env)
+        for step in range(self.max_steps):
             S = vec.states
             acts = _act(ctrl, S, vec.targets, impacts, obs)
             obs, _, term, trunc, info = vec.step(acts)
             impacts = np.asarray(info["impacts"])
             hits += impacts
-            best_d = min(best_d, float(np.min(info["distance"])))
+            S = vec.states
+            d = np.where(live, np.asarray(info["distance"], float), np.inf)
+            diag["best_d"] = min(diag["best_d"], float(np.min(d)))
+            within = d < tol
+            if within.any():
+                v = np.abs(self.core.R * S[within, 4])
+                diag["slowest_within"] = min(diag["slowest_within"], float(v.min()))
+                if (v < vtol).any():
+                    diag["calmest"] = min(diag["calmest"], float(np.abs(S[within, 5][v < vtol]).min()))
             if hits.any():
-                max_w_after_hit = max(max_w_after_hit, float(np.max(np.abs(vec.states[hits > 0, 5]))))
+                diag["max_w_after_hit"] = max(diag["max_w_after_hit"], float(np.max(np.abs(S[hits > 0, 5]))))
+            diag["steps"] = step + 1
+            term = np.asarray(term, bool) & live  # (a row truncated early is reset on its next step: not this pair)
             if term.any():
                 return int(np.flatnonzero(term)[0]), {}
-            if trunc.all():
+            live &= ~np.asarray(trunc, bool)
+            if not live.any():
                 break
-        return None, {"best_d": best_d, "any_hit": bool(hits.any()), "max_w_after_hit": max_w_after_hit}
+        diag["any_hit"] = bool(hits.any())
+        return None, diag
 
-    def why(self, diag) -> str:
-        tol = self.core.task.tolerance
-        if self.plane and self.probe == "Steer":
-            return "open plane: theta_dot is conserved, the penny never comes to rest (theorem T2)"
-        if self.plane and self.probe == "Drive":
-            return "open plane: phi_dot = 0 is conserved, the target is off the heading line (theorem T3)"
+    def theorem(self, state, target):
+        """The theorem that makes this pair impossible (a TheoremVerdict), or None."""
+        from penny_env.analysis.controllability_theorems import pair_theorem
+        return pair_theorem(self.scene, self.task, state, target)
+
+    def why(self, diag, theorem=None) -> str:
+        """Why no candidate succeeded: the success conditions never met by the searched episodes (position, speed,
+        time) and, where a theorem covers the pair, the theorem with its numbers."""
+        tol, vtol = self.task.tolerance, self.task.speed_tolerance
+        T = self.max_steps * self.scene.control_dt
+        parts = []
         if self.probe == "Drive" and diag.get("any_hit") and diag.get("max_w_after_hit", 1.0) < 1e-9:
-            return "start on an invariant line (T3): every impact was straight-on, phi_dot stayed 0"
-        return (f"no strategy in the family succeeded ({len(self.cands)} candidates): closest approach "
-                f"{diag['best_d']:.3f} m (tolerance {tol:g} m)")
+            parts.append("start on an invariant line (T3.4): every impact was straight-on, phi_dot stayed 0")
+        best = diag.get("best_d", np.inf)
+        if best >= tol:
+            parts.append(f"position never met: closest approach {best:.3f} m >= tolerance {tol:g} m")
+        elif self.task.kind == "park" and diag.get("slowest_within", np.inf) >= vtol:
+            parts.append(f"position met (closest approach {best:.4f} m < tolerance {tol:g} m) but speed never: within "
+                         f"the tolerance |R theta_dot| >= {diag['slowest_within']:.4f} m/s >= speed_tolerance {vtol:g} m/s")
+        elif self.task.kind == "park" and self.task.spin_tolerance is not None:
+            parts.append(f"position and rolling speed met but spin never: within the tolerance and under speed_tolerance "
+                         f"|phi_dot| >= {diag.get('calmest', np.inf):.3g} rad/s >= spin_tolerance "
+                         f"{self.task.spin_tolerance:g} rad/s")
+        head = (f"no strategy in the family succeeded ({len(self.cands)} candidates run for {diag.get('steps', 0)} "
+                f"steps = {diag.get('steps', 0) * self.scene.control_dt:g} s, the time limit {T:g} s)")
+        line = head + ": " + "; ".join(parts) if parts else head
+        if theorem is not None:
+            line = f"{theorem_line(theorem)}. Search: {line}"
+        return line
 
     def pair(self, seed: int) -> PairResult:
         """Search the pair of this seed, then certify the chosen controller in the real env episode."""
         env = self.env
         env.reset(seed=seed)
-        state, target = env.unwrapped.state, env.unwrapped.target
+        state, target = env.unwrapped.state.copy(), env.unwrapped.target.copy()
+        thm = self.theorem(state, target)
+        tid = thm.id if thm is not None else ""
         idx, diag = self.search(state, target)
         if idx is None:
-            return PairResult(seed, False, self.why(diag))
+            return PairResult(seed, False, self.why(diag, thm), theorem=tid)
         params = self.cands[idx:idx + 1]
         ok, steps, n_imp, actions = run_episode(env, self.family(self.core, params), seed)
         if not ok:
-            return PairResult(seed, False, f"the searched candidate {tuple(params[0].tolist())} failed in the real "
-                              "episode", steps, n_imp, tuple(params[0].tolist()))
+            why = f"the searched candidate {tuple(params[0].tolist())} failed in the real episode"
+            return PairResult(seed, False, why if thm is None else f"{theorem_line(thm)}. Search: {why}", steps, n_imp,
+                              tuple(params[0].tolist()), theorem=tid)
+        if thm is not None:
+            raise TheoremContradiction(f"{self.env_id} {self.overrides} seed {seed}: a witness episode succeeded on a "
+                                       f"pair that {thm.label} excludes ({thm.reason}); the simulator, the witness "
+                                       "or the theorem's premises are wrong")
         return PairResult(seed, True, "", steps, n_imp, tuple(params[0].tolist()), actions)
 
 
@@ -348,8 +408,14 @@ def main(argv=None) -> int:
     seeds = list(range(args.seed, args.seed + args.pairs))
     results = witness_cell(args.env_id, overrides, seeds, args.workers)
     k = sum(r.witnessed for r in results)
+    excluded = [r.theorem for r in results if r.theorem]
     where = " ".join(f"{k}={v}" for k, v in overrides.items())
-    print(f"{args.env_id}{' ' + where if where else ''}: witnessed {k}/{len(results)} pairs")
+    from penny_env.analysis.controllability_theorems import theorem_for
+    cell = theorem_for(args.env_id, **overrides)
+    print(f"{args.env_id}{' ' + where if where else ''}: witnessed {k}/{len(results)} pairs"
+          + (f"; {len(excluded)}/{len(results)} impossible (theorem {', '.join(sorted(set(excluded)))})" if excluded else ""))
+    if cell is not None:
+        print(f"the whole cell: {theorem_line(cell)}")
     for r in results:
         if not r.witnessed:
             print(f"  seed {r.seed}: {r.reason}")

@@ -10,7 +10,9 @@ per pair, witnesses_run.json) and the README's answer block.
     python -m training.witness_study --report-only               # rewrite the report and README from the CSVs
 
 The open plane has no walls, so its law changes nothing: one plane cell per probe stands for every law.
---quick never writes into docs/ or the README.
+Beyond the presets, EXTRA_TABLES (tables no preset names, as field overrides) show the theorems applied to a cell
+the presets do not cover: a circle of radius 0.5 m, where theorem T2.5 excludes every steer-only pair, and one
+of radius 0.35 m, where it excludes some. --quick never writes into docs/ or the README.
 """
 from __future__ import annotations
 
@@ -32,12 +34,18 @@ DOCS = ROOT / "docs"
 TABLES = ("plane", "ellipse", "stadium", "circle", "rounded_rectangle")
 TABLE_NAMES = {"plane": "Plane", "ellipse": "Ellipse", "stadium": "Stadium", "circle": "Circle",
                "rounded_rectangle": "RoundedRectangle"}
+# tables no preset names (scene field overrides), run with the steer-only probe and e = 0.5 walls
+EXTRA_TABLES = {"circle_r0.5": {"kind": "circle", "r": 0.5}, "circle_r0.35": {"kind": "circle", "r": 0.35}}
+EXTRA_NAMES = {"circle_r0.5": "Circle r = 0.5 m", "circle_r0.35": "Circle r = 0.35 m"}
+EXTRA_CELLS = (("Steer", "circle_r0.5", "0.5"), ("Steer", "circle_r0.35", "0.5"))
+ALL_TABLES = TABLES + tuple(EXTRA_TABLES)
 LAWS = {"elastic": "Elastic", "plastic": "Plastic", "0.5": "E05"}  # law value (as in ids' YAML) -> id suffix
 PROBE_TASKS = {"Steer": "steer only, park", "Drive": "drive only, reach", "Both": "both controls, park"}
-QUICK_CELLS = (("Steer", "circle", "plastic"), ("Drive", "ellipse", "elastic"), ("Drive", "plane", "-"))
+QUICK_CELLS = (("Steer", "circle", "plastic"), ("Drive", "ellipse", "elastic"), ("Drive", "plane", "-"),
+               ("Steer", "circle_r0.5", "0.5"))
 CELL_FIELDS = ["probe", "table", "law", "env_id", "overrides", "pairs", "witnessed", "rate", "ci_low", "ci_high",
-               "seconds", "verdict"]
-PAIR_FIELDS = ["probe", "table", "law", "seed", "witnessed", "steps", "impacts", "params", "reason"]
+               "seconds", "excluded", "excluded_by", "verdict"]
+PAIR_FIELDS = ["probe", "table", "law", "seed", "witnessed", "steps", "impacts", "params", "theorem", "reason"]
 README_BEGIN = "<!-- witness-answer: written by python -m training.witness_study (training/witness_study.py) -->"
 README_END = "<!-- /witness-answer -->"
 
@@ -54,6 +62,8 @@ def cell_spec(probe: str, table: str, law: str) -> tuple[str, dict]:
 
     if table == "plane":
         return f"PennyProbe{probe}-Plane-v0", {}
+    if table in EXTRA_TABLES:
+        return f"PennyProbe{probe}-Ellipse-Elastic-v0", {"table": dict(EXTRA_TABLES[table]), "law": law_value(law)}
     env_id = f"PennyProbe{probe}-{TABLE_NAMES[table]}-{LAWS[law]}-v0"
     if env_id in gym.registry:
         return env_id, {}
@@ -62,7 +72,11 @@ def cell_spec(probe: str, table: str, law: str) -> tuple[str, dict]:
 
 def all_cells():
     return [(p, t, "-" if t == "plane" else law) for p in PROBES for t in TABLES
-            for law in (("-",) if t == "plane" else LAWS)]
+            for law in (("-",) if t == "plane" else LAWS)] + list(EXTRA_CELLS)
+
+
+def table_name(table: str) -> str:
+    return TABLE_NAMES.get(table) or EXTRA_NAMES[table]
 
 
 _WITNESSES = {}  # per process: the cell's Witness (its envs load compiled code once)
@@ -80,7 +94,7 @@ def _run_chunk(task):
         r = w.pair(s)
         out.append({"probe": probe, "table": table, "law": law, "seed": s, "witnessed": int(r.witnessed),
                     "steps": r.steps, "impacts": r.impacts, "params": " ".join(f"{v:.4g}" for v in r.params),
-                    "reason": r.reason})
+                    "theorem": r.theorem, "reason": r.reason})
     return out, time.process_time() - t0
 
 
@@ -88,10 +102,10 @@ def run_cells(cells, pairs, seed, workers, theorem_pairs=None):
     """(pair rows, {cell: CPU seconds}) of every cell's pairs, split over `workers` processes. Cells that a
     theorem declares impossible run theorem_pairs pairs (default: pairs): there the witness only checks that
     no episode contradicts the theorem, and its search runs every candidate to the time limit."""
-    def n_of(p, t):
-        return min(pairs, theorem_pairs) if theorem_pairs and theorem_of(p, t) else pairs
-    tasks = [(p, t, law, list(range(seed + i, seed + n_of(p, t), workers)))
-             for (p, t, law) in cells for i in range(min(workers, n_of(p, t)))]
+    def n_of(p, t, law):
+        return min(pairs, theorem_pairs) if theorem_pairs and theorem_of(p, t, law) else pairs
+    tasks = [(p, t, law, list(range(seed + i, seed + n_of(p, t, law), workers)))
+             for (p, t, law) in cells for i in range(min(workers, n_of(p, t, law)))]
     rows, seconds = [], {}
 
     def collect(results):  # (lazily: progress is printed as the chunks finish, in order)
@@ -112,7 +126,7 @@ def run_cells(cells, pairs, seed, workers, theorem_pairs=None):
 
 def _order(r):
     """Sort key of a cell: probe, table, law in PROBES, TABLES, LAWS order."""
-    return PROBES.index(r["probe"]), TABLES.index(r["table"]), list(LAWS).index(r["law"]) if r["law"] in LAWS else -1
+    return PROBES.index(r["probe"]), ALL_TABLES.index(r["table"]), list(LAWS).index(r["law"]) if r["law"] in LAWS else -1
 
 
 def cell_rows(pair_rows, seconds):
@@ -122,13 +136,20 @@ def cell_rows(pair_rows, seconds):
     out = []
     for (probe, table, law), rs in cells.items():
         k, n = sum(int(r["witnessed"]) for r in rs), len(rs)
+        ex, by = excluded_of(rs)
         lo, hi = clopper_pearson(k, n)
         env_id, over = cell_spec(probe, table, law)
         out.append({"probe": probe, "table": table, "law": law, "env_id": env_id,
                     "overrides": " ".join(f"{a}={b}" for a, b in over.items()), "pairs": n, "witnessed": k,
                     "rate": k / n, "ci_low": lo, "ci_high": hi, "seconds": round(seconds.get((probe, table, law), 0.0), 1),
-                    "verdict": cell_verdict(probe, table, k, n, law)})
+                    "excluded": ex, "excluded_by": by, "verdict": cell_verdict(probe, table, k, n, law, ex, by)})
     return out
+
+
+def excluded_of(pair_rows):
+    """(pairs a theorem excludes, their theorem ids joined by ', ') of one cell's pair rows."""
+    ids = [r.get("theorem", "") for r in pair_rows if r.get("theorem", "")]
+    return len(ids), ", ".join(sorted(set(ids)))
 
 
 def read_csv(path):
@@ -188,9 +209,21 @@ def verdict_grid(cells):
 def _verdict_md(c, link=f"{THEORY_DOC}"):
     v = c["verdict"]
     if v.startswith("impossible"):
-        thm = theorem_of(c["probe"], c["table"])[0]
+        thm = theorem_of(c["probe"], c["table"], c["law"])[0]
         return f"impossible ([theorem {thm}]({link}#{anchor_of(thm)}))"
     return v
+
+
+def extra_rows(cells):
+    """Markdown rows of the cells on tables no preset names (EXTRA_TABLES): the theorems applied to overrides."""
+    lines = ["| actuation | table (override) | law | pairs | witnessed | impossible by theorem (pairs) | verdict |",
+             "| --- | --- | --- | ---: | ---: | --- | --- |"]
+    for c in cells:
+        if c["table"] in EXTRA_TABLES:
+            ex = f"{c['excluded']}/{c['pairs']} ({c['excluded_by']})" if int(c["excluded"]) else "0"
+            lines.append(f"| {PROBE_TASKS[c['probe']]} | {table_name(c['table'])} (`table={EXTRA_TABLES[c['table']]}`) | "
+                         f"{c['law']} | {c['pairs']} | {c['witnessed']} | {ex} | {_verdict_md(c)} |")
+    return lines
 
 
 def learn_rows(cells, rl):
@@ -223,18 +256,19 @@ def failures(pair_rows):
             groups.setdefault(_key(r), {}).setdefault(r["reason"], []).append(str(r["seed"]))
     for key, reasons in groups.items():
         for reason, seeds in reasons.items():
-            lines.append(f"- {PROBE_TASKS[key[0]]}, {TABLE_NAMES[key[1]]}, law {key[2]}: seeds {', '.join(seeds)}: {reason}")
+            lines.append(f"- {PROBE_TASKS[key[0]]}, {table_name(key[1])}, law {key[2]}: seeds {', '.join(seeds)}: {reason}")
     return lines or ["- none: every pair of every cell that no theorem forbids was witnessed"]
 
 
 def summary(cells):
-    """Per probe: (impossible tables, witnessed cells as (k, N), open cells)."""
+    """Per probe: (impossible tables, witnessed cells as (k, N), open cells), over the preset tables (TABLES; the
+    override cells of EXTRA_TABLES are reported on their own)."""
     out = {}
     for probe in PROBES:
-        cs = [c for c in cells if c["probe"] == probe]
+        cs = [c for c in cells if c["probe"] == probe and c["table"] in TABLES]
         imp = [c for c in cs if c["verdict"].startswith("impossible")]
         wit = [c for c in cs if c["verdict"].startswith("possible")]
-        opn = [c for c in cs if c["verdict"] == "open"]
+        opn = [c for c in cs if c["verdict"].startswith("open")]
         out[probe] = (imp, wit, opn)
     return out
 
@@ -260,8 +294,7 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
                 thm = theorem_of(probe, t)[0]
                 row.append(f"**impossible** (theorem {thm})")
             else:
-                row.append(" · ".join("open" if c["verdict"] == "open" else f"{c['witnessed']}/{c['pairs']}"
-                                      for c in cs))
+                row.append(" · ".join(_count_md(c) for c in cs))
         lines.append(f"| {PROBE_TASKS[probe]} | " + " | ".join(row) + " |")
     lines.append("")
     sentences = []
@@ -288,7 +321,22 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
         if bits:
             sentences.append(f"**{PROBE_TASKS[probe]}**: " + "; ".join(bits) + ".")
     lines.append(" ".join(sentences) + " The RL rates are learnability, not the verdict.")
+    extra = [c for c in cells if c["table"] in EXTRA_TABLES]
+    if extra:
+        lines += ["", "The theorems apply to every cell, overrides and user tables included (steer only, e = 0.5): "
+                  + "; ".join(f"{table_name(c['table'])}: "
+                              + (f"**impossible** (theorem {theorem_of(c['probe'], c['table'], c['law'])[0]})"
+                                 if c["verdict"].startswith("impossible") else _count_md(c)) for c in extra) + "."]
     return "\n".join(lines)
+
+
+def _count_md(c) -> str:
+    """'k/N' of a cell, with the pairs a theorem excludes ('k/N, m impossible (T2.5)'), or 'open'."""
+    ex = int(c.get("excluded", 0) or 0)
+    tail = f", {ex} impossible ({c['excluded_by']})" if ex else ""
+    if c["verdict"].startswith("open"):
+        return f"open (0/{c['pairs']}{tail})"
+    return f"{c['witnessed']}/{c['pairs']}{tail}"
 
 
 def update_readme(readme: Path, answer: str) -> bool:
@@ -322,13 +370,19 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
              "",
              "## The verdict", "",
              f"Per (actuation, law, table): **impossible (theorem Tk)** where [{THEORY_DOC}]({THEORY_DOC}) proves "
-             "the probe's task unreachable from every start; **possible (witnessed k/N)** where at least one of N "
+             "the probe's task unreachable from every start/target pair the cell can draw (its table, spawn and target "
+             "regions, time limit and speeds); where a theorem excludes only some of the N pairs drawn, the count "
+             "follows the witnessed one (\"m/N impossible, theorem Tk\"); **possible (witnessed k/N)** where at least one of N "
              "start/target pairs of the probe's own distribution was solved by an episode of the package's "
              "environment ending with `is_success` (training/witness.py); **open** otherwise. A witness in a "
              "theorem's cell would be a contradiction and stops the report (training/verdict.py). The open plane "
              "has no walls: one run stands for every law. Theory beside the witnessed cells: "
              + ", ".join(f"{PROBE_TASKS[p]}: {t}" for p, t in CONTEXT.items()) + ".", "",
              *verdict_grid(cells), "",
+             "Tables no preset names (field overrides of the probe ids): the same theorems, read from the cell's table, "
+             "spawn and target regions, time limit and speeds (penny_env/analysis/controllability_theorems.py); a pair "
+             "that a theorem excludes is still searched (a witness there would stop the report):", "",
+             *extra_rows(cells), "",
              "## Learnability: the RL study's agents beside the verdict", "",
              "The best trained agent (PPO or SAC, highest pooled success) of each cell of the RL study "
              "([study.md](study.md), from docs/study.csv: success pooled over its seeds; per-seed data lives in "
@@ -344,7 +398,7 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
              "| --- | --- | --- | --- | --- | --- | ---: |"]
     for c in cells:
         ident = f"`{c['env_id']}`" + (f" `{c['overrides']}`" if c["overrides"] else "")
-        lines.append(f"| {PROBE_TASKS[c['probe']]} | {TABLE_NAMES[c['table']]} | {c['law']} | {ident} | "
+        lines.append(f"| {PROBE_TASKS[c['probe']]} | {table_name(c['table'])} | {c['law']} | {ident} | "
                      f"{c['witnessed']}/{c['pairs']} | {float(c['rate']):.2f} [{float(c['ci_low']):.3f}, "
                      f"{float(c['ci_high']):.3f}] | {float(c['seconds']):.0f} |")
     lines += ["", "## Pairs not witnessed, and why", "", *failures(pair_rows), "",
@@ -411,7 +465,9 @@ def main(argv=None):
         meta_json.write_text(json.dumps(meta, indent=1))
     cells.sort(key=_order)
     for c in cells:  # the verdict recomputed from the counts (a CSV edited by hand cannot carry another)
-        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"])
+        c["excluded"], c["excluded_by"] = excluded_of([r for r in pair_rows if _key(r) == _key(c)])
+        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"],
+                                    c["excluded"], c["excluded_by"])
     rl = study_rl(args.study_csv)
     write_report(out_dir / "witnesses.md", cells, pair_rows, rl, meta)
     print(f"wrote {out_dir / 'witnesses.md'}")

@@ -373,6 +373,23 @@ def spectra_rows(cases, two_traj, fmt):
     return rows, flow_rows
 
 
+def _answer_block(out) -> list[str]:
+    """The question-2 answer between its markers: billiards_answer's block from its stored summary
+    (billiards_answer.json beside the report) where there is one, else the block the report already has (its
+    command writes it), else the markers with a pointer."""
+    import json
+
+    from .billiards_answer import README_BEGIN, README_END, answer_block
+
+    stored = out.with_name("billiards_answer.json")
+    if stored.is_file():
+        return [README_BEGIN, answer_block(json.loads(stored.read_text()), base=""), README_END]
+    old = out.read_text() if out.is_file() else ""
+    if README_BEGIN in old and README_END in old:
+        return [README_BEGIN + old.split(README_BEGIN, 1)[1].split(README_END, 1)[0].rstrip("\n"), README_END]
+    return [README_BEGIN, "(not computed yet: run python -m penny_env.analysis.billiards_answer)", README_END]
+
+
 def main(argv=None):
     from .common import fmt, header, report_path, table
 
@@ -592,6 +609,11 @@ def _write(out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons,
         f"{rho:.4g}, that of theta_dot = 10, phi_dot = 0.2 rad/s) on the wall, drawn from the invariant measure of the elastic "
         "map (below), the same starts for every law on a table. Code: `penny_env/analysis/boundary_map.py` (the map, its "
         "exact tangent maps) and `penny_env/analysis/billiards.py` (this report).", "",
+        "## The answer to question 2", "",
+        "Written by `python -m penny_env.analysis.billiards_answer` ([billiards_answer.md](billiards_answer.md): 20,000 "
+        "impacts per orbit, periodic orbits, slices, the dissipative fate, the cross-check with a published exponent); "
+        "this report's finite-time exponents cover 1200 impacts and are indicators, not the answer.", "",
+        *_answer_block(out), "",
         "## Coordinates", "",
         "In the scaled speeds (u, w) = (sqrt(I + m R^2) theta_dot, sqrt(J) phi_dot) the kinetic energy is rho^2 / 2 and "
         "between impacts the speeds are constant, so scaling both only rescales time. The boundary map takes one "

@@ -116,6 +116,35 @@ def rest_making_spin(u, nu_u, nu_w, e):
     return u * (n2 - (1.0 + e) * nu_u * nu_u) / ((1.0 + e) * nu_u * nu_w)
 
 
+def free_angle(beta) -> float:
+    """The most the heading of a penny that stopped rolling at an impact of incidence beta can turn, spinning in
+    place, before one of its ends reaches the impact point's tangent line again: pi - 2 |beta| (T2.8; the contact
+    point is R cos beta inside the tangent, the back end reaches it first). On a convex table, which lies on one side
+    of that tangent, the next impact comes no later."""
+    return math.pi - 2.0 * abs(float(beta))
+
+
+def stopping_spin(u, nu_u, nu_w, e):
+    """The scaled spin w+ right after a stopping impact (u+ = 0, T2.4) of a penny rolling at scaled speed u:
+    -e u / ((1 + e) n_u n_w), n = nu / |nu| (the tangential part of v is kept and the normal part scaled by -e,
+    with v+ = (0, w+)). Since |n_u n_w| <= 1/2, |w+| >= 2 e |u| / (1 + e), with equality where |n_u| = |n_w|
+    (T2.8)."""
+    n = np.hypot(nu_u, nu_w)
+    return -np.asarray(e, float) * u / ((1.0 + np.asarray(e, float)) * (nu_u / n) * (nu_w / n))
+
+
+def braking_threshold(params, a1, e=1.0, angle=math.pi) -> float:
+    """T2.8: the pre-impact rolling speed |theta_dot| above which the spin left by a stopping impact with
+    restitution e cannot be braked at |phi''| <= a1 within `angle` (the free angle, at most pi): the spin after
+    it is at least (2 e / (1 + e)) sqrt((I + m R^2) / J) |theta_dot| (:func:`stopping_spin`), and braking it turns
+    the heading by spin^2 / (2 a1): ((1 + e) / (2 e)) sqrt(2 a1 angle J / (I + m R^2)). 3.24 rad/s for the paper's
+    penny with a1 = 10 rad/s^2 on elastic walls, 4.85 rad/s at e = 0.5 (angle pi). A plastic wall has e(beta) >= its
+    smallest value (1/3 for the thin penny): use that e."""
+    if not (e > 0.0):
+        return math.inf
+    return (1.0 + e) / (2.0 * e) * math.sqrt(2.0 * a1 * angle * params.J / params.rolling_inertia)
+
+
 def energy_loss(u, w, nu_u, nu_w, e):
     """Kinetic energy removed by a restitution e across nu: (1 - e^2) (v . nu)^2 / (2 |nu|^2)."""
     vn = u * nu_u + w * nu_w
