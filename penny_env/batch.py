@@ -7,7 +7,7 @@ laws "elastic", "plastic" or a restitution coefficient. Every input is checked a
 field and the row (``states[3] has a non-finite phi``).
 
 >>> import numpy as np, penny_env.batch as pb
->>> res = pb.simulate(np.array([[0, 0, 0, 1.57, 10, 0.2]] * 4), table={"kind": "circle", "r": 0.2},
+>>> res = pb.simulate(np.array([[0, 0, 0, 1.57, 10, 0.2]] * 4), table={"kind": "circle", "radius": 0.2},
 ...                   law="elastic", t_final=2.0)
 >>> res.final_states.shape
 (4, 6)
