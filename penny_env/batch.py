@@ -154,7 +154,7 @@ def _cuda_target():
 
     from .physics.builder import cuda_available
     if importlib.util.find_spec("numba_cuda") is None:
-        raise ValueError("backend='cuda' needs numba-cuda: pip install 'penny-env[cuda]'")
+        raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, pip install -e \".[cuda]\" (docs/gpu.md)")
     if not cuda_available():
         raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
     return "cuda"

@@ -17,7 +17,7 @@ PPO_CONFIG = str(REPO / "configs" / "train" / "ppo_reach_ellipse.yaml")
 SAC_CONFIG = str(REPO / "configs" / "train" / "sac_park_circle.yaml")
 
 
-def test_train_quick_then_evaluate_its_output(reports_untouched, capsys):
+def test_train_quick_then_evaluate_its_output(reports_untouched, capsys, monkeypatch):
     from training import evaluate, train
     train.main(["--config", PPO_CONFIG, "--quick", "--out", "run"])
     out = capsys.readouterr().out
@@ -35,6 +35,15 @@ def test_train_quick_then_evaluate_its_output(reports_untouched, capsys):
     best = evaluate.main([str(run), "--episodes", "4", "--no-video", "--best"])
     assert best["model"].endswith("best_model.zip")
     assert (run / "evaluation_best.json").is_file()
+    # without MoviePy (the main job's install): the default evaluation still prints its numbers, then one
+    # line on how to get the videos (it crashed after the episodes)
+    capsys.readouterr()
+    monkeypatch.setitem(__import__("sys").modules, "moviepy", None)  # find_spec("moviepy") -> None
+    res = evaluate.main([str(run), "--episodes", "4"])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert "success" in lines[0] and "Wilson" in lines[0] and "videos" not in res
+    assert lines[1:] == [evaluate.VIDEO_HINT] and 'pip install -e ".[video]"' in lines[1]
+    assert not (run / "videos").exists() and (run / "evaluation.json").is_file()
 
 
 def test_progress_lines_off_a_terminal(reports_untouched, capsys):
