@@ -240,14 +240,15 @@ def readme_sentence(part: str, result: dict | None, readme: str) -> str:
                     f"environment, wheels from this machine's cache and package indexes{retry})")
     where = (f"measured by `python -m training.measure_readme` ([docs/readme_costs.md](docs/readme_costs.md)) on "
              f"{_machine(result)}, {result.get('date', '?')}, load average {mean:.1f} on average (at most {peak:.1f}; "
-             "above the core count other jobs competed for the cores)")
+             "a load above the core count means other jobs competed for the cores)")
     if part == "tests":
         suite = next(r for r in run if r["step"].startswith("python -m pytest"))
         counts = ", ".join(f"{n} {k}" for k, n in (suite.get("pytest") or {}).items())
         return (f"Cost: {install_text}, and the suite {_duration(suite['seconds'])} ({counts}); {where}.")
-    parts = ", ".join(f"{_duration(r['seconds'])} for `{r['step'].split()[2]}`" for r in run)
+    parts = "".join(f", then {_duration(r['seconds'])} for `{r['step'].split()[2]}`" if i == 0 else
+                    f", {_duration(r['seconds'])} for `{r['step'].split()[2]}`" for i, r in enumerate(run))
     total = sum(r["seconds"] for r in timed)
-    return f"Cost: {_duration(total)} in all: {install_text}, then {parts}; {where}."
+    return f"Cost: {_duration(total)} in all: {install_text}{parts}; {where}."
 
 
 def update_readme(path: Path, results: dict) -> None:
