@@ -11,7 +11,7 @@ episodes on fresh seeds (default: the run's evaluation seeds). The interval is W
 interval for a binomial proportion. Videos (gymnasium RecordVideo, needs MoviePy: the `video` extra)
 go to RUN_DIR/videos/; without MoviePy the evaluation runs and prints its numbers, and one line says
 how to get the videos; results to RUN_DIR/evaluation.json. --gif writes one episode as an animated
-GIF (Pillow, every other frame; needs pygame only), e.g. for the docs: the first evaluation episode,
+GIF (Pillow, which matplotlib brings; every other frame; no pygame needed), e.g. for the docs: the first evaluation episode,
 or with --gif-success the first one that succeeded (the first one if none did).
 """
 from __future__ import annotations
