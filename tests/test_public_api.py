@@ -73,9 +73,9 @@ def test_new_code_raises_no_deprecation_warning():
 
 def test_a_partial_table_override_with_the_old_name_replaces_the_radius():
     """gymnasium.make("PennyPark-Circle-v0", table={"r": ...}) (older code) overrides the preset's radius."""
-    with pytest.warns(DeprecationWarning):
+    with pytest.warns(DeprecationWarning):  # the scene keeps the spec as given: each table built from it warns
         env = gym.make("PennyPark-Circle-v0", table={"r": 0.2})
-    table = env.unwrapped.scene.make_table()
+        table = env.unwrapped.scene.make_table()
     assert table == pe.Circle(0.2)
     env = gym.make("PennyPark-Circle-v0", table={"radius": 0.25})
     assert env.unwrapped.scene.make_table() == pe.Circle(0.25)
