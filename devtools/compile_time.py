@@ -25,7 +25,7 @@ import tempfile
 
 SHAPES = {  # shape -> an env id on it (and the batch table spec)
     "Ellipse": ("PennyReach-Ellipse-v0", {"kind": "ellipse", "a": 0.3, "b": 0.2}),
-    "Circle": ("PennyPark-Circle-v0", {"kind": "circle", "r": 0.2}),
+    "Circle": ("PennyPark-Circle-v0", {"kind": "circle", "radius": 0.2}),
     "Stadium": ("PennyImpacts-Stadium-v0", {"kind": "stadium", "radius": 0.1, "length": 0.15}),
     "RoundedRectangle": ("PennyReach-RoundedRectangle-v0", {"kind": "rounded_rectangle", "width": 0.3,
                                                             "height": 0.2, "radius": 0.04}),

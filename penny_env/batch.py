@@ -7,7 +7,7 @@ laws "elastic", "plastic" or a restitution coefficient. Every input is checked a
 field and the row (``states[3] has a non-finite phi``).
 
 >>> import numpy as np, penny_env.batch as pb
->>> res = pb.simulate(np.array([[0, 0, 0, 1.57, 10, 0.2]] * 4), table={"kind": "circle", "r": 0.2},
+>>> res = pb.simulate(np.array([[0, 0, 0, 1.57, 10, 0.2]] * 4), table={"kind": "circle", "radius": 0.2},
 ...                   law="elastic", t_final=2.0)
 >>> res.final_states.shape
 (4, 6)
@@ -159,7 +159,7 @@ def _cuda_target():
 
     from .backends.builder import cuda_available
     if importlib.util.find_spec("numba_cuda") is None:
-        raise ValueError("backend='cuda' needs numba-cuda: from a clone of penny_env, pip install -e '.[cuda]'")
+        raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, pip install -e \".[cuda]\" (docs/gpu.md)")
     if not cuda_available():
         raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
     return "cuda"

@@ -6,7 +6,7 @@ import penny_env as pe
 import penny_env.batch as pb
 from penny_env.physics import PennyParams, simulate
 
-CIRCLE = {"kind": "circle", "r": 0.2}
+CIRCLE = {"kind": "circle", "radius": 0.2}
 STATES = np.array([[0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2],
                    [0.05, -0.02, 1.0, 0.3, -8.0, 1.0],
                    [-0.1, 0.05, 0.0, 2.0, 12.0, -0.5]])

@@ -21,7 +21,7 @@ from penny_env.analysis import impact_geometry as ig
 P = PennyParams()  # the paper's US penny: I = m R^2 / 2, J = m R^2 / 4
 TABLES = {"ellipse": Ellipse(0.15, 0.2), "circle": Circle(0.15), "stadium": Stadium(0.1, 0.15),
           "rounded_rectangle": RoundedRectangle(0.3, 0.2, 0.04)}
-TABLE_FIELDS = {"ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2}, "circle": {"kind": "circle", "r": 0.15},
+TABLE_FIELDS = {"ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2}, "circle": {"kind": "circle", "radius": 0.15},
                 "stadium": {"kind": "stadium", "radius": 0.1, "length": 0.15},
                 "rounded_rectangle": {"kind": "rounded_rectangle", "width": 0.3, "height": 0.2, "radius": 0.04}}
 LAWS = ["elastic", "plastic", 0.0, 0.5, 0.9]

@@ -53,7 +53,7 @@ def test_lyapunov_exponents_separate_integrable_from_chaotic():
     S[:, 2:4] = rng.uniform(-np.pi, np.pi, (4, 2))
     S[:, 4] = rng.uniform(6, 12, 4)
     S[:, 5] = rng.uniform(-1, 1, 4)
-    circle = lyapunov_exponents(S, 100.0, table={"kind": "circle", "r": 0.2}, n_checkpoints=100)
+    circle = lyapunov_exponents(S, 100.0, table={"kind": "circle", "radius": 0.2}, n_checkpoints=100)
     stadium = lyapunov_exponents(S, 100.0, table=STADIUM, n_checkpoints=100)
     assert circle.log_distance.shape == (100, 4) and np.all(np.isfinite(circle.exponents))
     assert np.all(circle.exponents < 0.05)  # linear separation: the fitted rate falls like log(t) / t

@@ -214,15 +214,15 @@ def test_config_errors_name_the_field(tmp_path):
     with pytest.raises(ConfigError, match="unknown scene preset"):
         PennyEnv("hexagon")
     bad = tmp_path / "bad.yaml"
-    bad.write_text("table: {kind: circle, r: [\n")
+    bad.write_text("table: {kind: circle, radius: [\n")
     with pytest.raises(ConfigError, match="invalid YAML"):
         PennyEnv(scene=str(bad))
     unknown = tmp_path / "unknown.yaml"
-    unknown.write_text("table: {kind: circle, r: 0.1}\nfriction: 0.3\n")
+    unknown.write_text("table: {kind: circle, radius: 0.1}\nfriction: 0.3\n")
     with pytest.raises(ConfigError, match="friction"):
         PennyEnv(scene=str(unknown))
     good = tmp_path / "good.yaml"
-    good.write_text("table: {kind: circle, r: 0.1}\nlaw: 0.7\nactuation: drive\n")
+    good.write_text("table: {kind: circle, radius: 0.1}\nlaw: 0.7\nactuation: drive\n")
     env = PennyEnv(scene=str(good), task="park", tolerance=0.05)
     assert env.action_space.shape == (1,) and env.task.tolerance == 0.05 and env.scene.law == 0.7
     env.reset(seed=0)

@@ -20,7 +20,7 @@ from penny_env.physics.params import PennyParams
 
 needs_numba = pytest.mark.skipif(not available(), reason="numba is not installed")
 P = PennyParams()
-TABLES = [{"kind": "ellipse", "a": 0.15, "b": 0.2}, {"kind": "circle", "r": 0.12},
+TABLES = [{"kind": "ellipse", "a": 0.15, "b": 0.2}, {"kind": "circle", "radius": 0.12},
           {"kind": "stadium", "radius": 0.1, "length": 0.15}]
 
 

@@ -31,7 +31,7 @@ def _call_scalar(field, value):
         return pe.SolverSettings(**{field: value})
     if field in ("Ellipse.a", "Ellipse.b"):
         return pe.Ellipse(**{"a": 0.15, "b": 0.2, field[-1]: value})
-    if field == "Circle.r":
+    if field == "Circle.radius":
         return pe.Circle(value)
     if field == "Stadium.radius":
         return pe.Stadium(value, 0.1)
@@ -51,7 +51,7 @@ def _call_scalar(field, value):
 
 
 SCALAR_FIELDS = ["R", "m", "I", "J", "contact_tol", "zeno_window", "zeno_impacts", "max_search_steps",
-                 "max_events_per_interval", "max_impacts", "Ellipse.a", "Ellipse.b", "Circle.r", "Stadium.radius",
+                 "max_events_per_interval", "max_impacts", "Ellipse.a", "Ellipse.b", "Circle.radius", "Stadium.radius",
                  "Stadium.length", "t_final", "n_impacts", "control_dt", "batch t_final", "batch control_dt"]
 
 

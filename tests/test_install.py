@@ -18,12 +18,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def copy_package(dest: Path) -> Path:
     """A copy of the checkout's package sources (no caches) with training/ (the wheel must leave it out),
-    pyproject.toml and README.md."""
+    pyproject.toml, README.md and the files the sdist and the wheel's metadata take (LICENSE, ...)."""
     dest.mkdir(parents=True, exist_ok=True)
     for folder in ("penny_env", "training"):
         shutil.copytree(ROOT / folder, dest / folder, ignore=shutil.ignore_patterns("__pycache__", "_generated", "*.nbi", "*.nbc",
                                                                                    "*.stamp"))
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "CHANGELOG.md", "CITATION.cff"):
         shutil.copy(ROOT / name, dest / name)
     return dest
 
@@ -61,6 +61,12 @@ def test_the_wheel_ships_penny_env_with_its_data_and_no_top_level_training(wheel
               if p.suffix in (".py", ".yaml", ".json") and "__pycache__" not in p.parts and "_generated" not in p.parts}
     assert needed and needed <= names, sorted(needed - names)
     assert not [n for n in names if "_generated" in n]
+    # the metadata: the one version (penny_env.__version__), the license and its file
+    import penny_env
+    info = next(n for n in names if n.endswith(".dist-info/METADATA"))
+    metadata = zipfile.ZipFile(wheel).read(info).decode()
+    assert f"\nVersion: {penny_env.__version__}\n" in metadata and "\nLicense-Expression: MIT\n" in metadata
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
 
 
 def unprivileged_prefix():

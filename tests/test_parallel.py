@@ -36,7 +36,7 @@ FORK = """
         for _ in range(5):
             v.step(np.full((N, 2), 0.5, dtype=np.float32))
         S = np.zeros((N, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, N)
-        res = pb.simulate(S, table={"kind": "circle", "r": 0.2}, law="elastic", t_final=0.3)
+        res = pb.simulate(S, table={"kind": "circle", "radius": 0.2}, law="elastic", t_final=0.3)
         assert res.final_states.shape == (N, 6)
         return np.concatenate([v.step(np.full((N, 2), 0.5, dtype=np.float32))[0].ravel(), res.final_states.ravel()])
 
@@ -93,7 +93,7 @@ THREADS = """
                 v.step(a)
             S = np.zeros((N, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, N)
             for _ in range(20):
-                pb.simulate(S, table={"kind": "circle", "r": 0.2}, law="elastic", t_final=0.2)
+                pb.simulate(S, table={"kind": "circle", "radius": 0.2}, law="elastic", t_final=0.2)
         except Exception as exc:  # noqa: BLE001
             errors.append(exc)
 
@@ -159,8 +159,8 @@ def test_the_parallel_loops_equal_the_serial_ones_on_a_walled_table():
     S = np.zeros((n, 6))
     S[:, 4] = 20.0
     S[:, 3] = np.linspace(0, 6, n)
-    whole = pb.simulate(S, table={"kind": "circle", "r": 0.12}, law="elastic", t_final=2.0)
-    part = pb.simulate(S[:8], table={"kind": "circle", "r": 0.12}, law="elastic", t_final=2.0)
+    whole = pb.simulate(S, table={"kind": "circle", "radius": 0.12}, law="elastic", t_final=2.0)
+    part = pb.simulate(S[:8], table={"kind": "circle", "radius": 0.12}, law="elastic", t_final=2.0)
     assert np.array_equal(whole.final_states[:8], part.final_states) and whole.impact_counts[:8].sum() >= 16
     assert np.array_equal(whole.impact_counts[:8], part.impact_counts)
 

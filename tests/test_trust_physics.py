@@ -123,7 +123,7 @@ def test_table_barely_wider_than_the_penny_is_refused():
         pb.simulate(np.array([s0]), table=tight, law="elastic", t_final=1.0)
     from penny_env.envs.scene import ConfigError, Scene
     with pytest.raises(ConfigError, match="table.*MIN_GAP"):
-        Scene(table={"kind": "circle", "r": PARAMS.R * (1 + 1e-9)}, init={"spawn_fraction": 0.0})
+        Scene(table={"kind": "circle", "radius": PARAMS.R * (1 + 1e-9)}, init={"spawn_fraction": 0.0})
 
 
 def test_elastic_penny_just_above_the_gap_limit_keeps_its_energy():

@@ -8,19 +8,25 @@ folder of training.train and every (cell, agent, seed) folder of training.study 
 --best evaluates best_model.zip (the best evaluation during training) instead of the final model,
 into RUN_DIR/evaluation_best.json. Episodes are deterministic-policy
 episodes on fresh seeds (default: the run's evaluation seeds). The interval is Wilson's score
-interval for a binomial proportion. Videos (gymnasium RecordVideo, needs moviepy and pygame)
-go to RUN_DIR/videos/; results to RUN_DIR/evaluation.json. --gif writes one episode as an animated
-GIF (Pillow, every other frame; needs pygame only), e.g. for the docs: the first evaluation episode,
+interval for a binomial proportion. Videos (gymnasium RecordVideo, needs MoviePy: the `video` extra)
+go to RUN_DIR/videos/; without MoviePy the evaluation runs and prints its numbers, and one line says
+how to get the videos; results to RUN_DIR/evaluation.json. --gif writes one episode as an animated
+GIF (Pillow, which matplotlib brings; every other frame; no pygame needed), e.g. for the docs: the first evaluation episode,
 or with --gif-success the first one that succeeded (the first one if none did).
 """
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 from pathlib import Path
 
 import numpy as np
+
+
+VIDEO_HINT = ('no video: recording needs MoviePy, the "video" extra (pip install -e ".[video]" in the clone); '
+              '--no-video skips it')
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -89,7 +95,9 @@ def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_ep
     res = {"env_id": cfg["env_id"], "algo": cfg["algo"], "model": str(run_dir / model_file), "episodes": episodes, "seed": seed, "successes": k,
            "success_rate": k / episodes, "ci95_wilson": [lo, hi], "mean_return": float(np.mean(r["return"])),
            "mean_impacts": float(np.mean(r["impacts"]))}
-    if video_episodes > 0:
+    if video_episodes > 0 and importlib.util.find_spec("moviepy") is None:
+        res["video_skipped"] = VIDEO_HINT  # the numbers above stand without it
+    elif video_episodes > 0:
         res["videos"] = record_video(cfg["env_id"], model, run_dir / "videos", video_episodes, seed)
     if gif:
         first = next((j for j, ok in enumerate(r["success"]) if ok), 0) if gif_success else 0
@@ -121,6 +129,8 @@ def main(argv=None):
           f"mean return {res['mean_return']:.2f}")
     for v in res.get("videos", []):
         print("video:", v)
+    if "video_skipped" in res:
+        print(res["video_skipped"])
     if "gif" in res:
         print(f"gif: {res['gif']} (episode seed {res['gif_seed']}, {'a success' if res['gif_success'] else 'not a success'})")
     return res

@@ -1,16 +1,23 @@
 """Measure what the README's two commands cost on this machine (issue 21.8): each one runs as written,
 step by step, in a fresh copy of the checkout with a fresh virtual environment; the report gives each
-step's wall time, the virtual environment's size after each install and the machine's load average.
+step's wall time, the virtual environment's size after each install, the machine's load average and,
+for the test command, pytest's counts.
 
-    python -m training.measure_readme [--parts main tests] [--out docs/readme_costs.md] [--quick] [--report-only]
+    python -m training.measure_readme [--parts main tests] [--out docs/readme_costs.md] [--readme README.md]
+                                      [--quick] [--report-only]
 
 Parts: "main" (the README's main job: install, the paper's figures, the PPO baseline) and "tests"
-(install everything, the test suite). Each part's measurement is kept in runs/readme_costs/<part>.json
-(under the working directory), so the parts can be measured at different times; the report is built
-from every part measured so far, each with its own date and load (--report-only: only that). Installs take their wheels from
-pip's cache or the machine's package index as configured: the report says how long that took here,
-not how long a download would. --quick checks the pipeline: the main job only, in the current
-environment (no venv, no installs), training cut to 4096 steps, the report into a temporary folder.
+(install everything, the test suite). The measurements are kept next to the report, in a JSON file of
+the same name (docs/readme_costs.json beside docs/readme_costs.md), so the parts can be measured at
+different times: measuring one keeps the other's last measurement, and the report always has both
+sections, each with its own date and load (--report-only: measure nothing, rewrite the report and the
+README from the JSON). --readme also rewrites the README's cost sentence of each part (between its
+``<!-- readme-costs:PART -->`` markers) from the measurement; a part not measured for the README's
+current command says so there. Installs take their wheels from pip's cache or the machine's package
+indexes as configured: the report says how long that took here, not how long a download would, and
+counts pip's connection retries (an index this machine cannot reach). --quick checks the pipeline: the
+main job only, in the current environment (no venv, no installs), training cut to 4096 steps, the report
+into a temporary folder; it refuses --readme.
 """
 from __future__ import annotations
 
@@ -122,15 +129,33 @@ def run_part(part: str, readme: str, workdir: Path, quick: bool = False, log=pri
         t0 = time.perf_counter()
         with LoadSampler() as load:
             run = subprocess.run(["bash", "-c", cmd], cwd=workdir, env=env, capture_output=True, text=True)
+        output = run.stdout + run.stderr
         row.update(seconds=time.perf_counter() - t0, rc=run.returncode, load=load.summary(),
-                   output_tail=(run.stdout + run.stderr)[-1500:])
+                   output_tail=output[-1500:])
+        if argv[0] == "pip" and output.count(PIP_RETRY):
+            row["pip_retries"] = output.count(PIP_RETRY)
+        if argv[:3] == ["python", "-m", "pytest"]:
+            row["pytest"] = pytest_counts(run.stdout)
         if argv[0] == "pip" and (workdir / ".venv").is_dir():
             row["venv_bytes"] = folder_bytes(workdir / ".venv")
         log(f"[measure_readme]   {row['seconds']:.0f} s, exit {run.returncode}, load max {row['load']['max']:.1f}")
         rows.append(row)
         if run.returncode != 0:
             break
-    return {"part": part, "quick": quick, "machine": machine, "steps": rows, "load_at_start": load_at_start}
+    return {"part": part, "quick": quick, "machine": machine, "steps": rows, "load_at_start": load_at_start,
+            "date": time.strftime("%Y-%m-%d", time.gmtime())}
+
+
+PYTEST_COUNTS = re.compile(r"(\d+) (passed|failed|skipped|errors?|xfailed|xpassed|deselected)")
+PIP_RETRY = "Retrying (Retry("
+
+
+def pytest_counts(output: str) -> dict | None:
+    """pytest's final counts ({"passed": 1199, "skipped": 9, ...}) from its summary line, or None."""
+    for line in reversed(output.splitlines()):
+        if re.search(r"\d+ (passed|failed|errors?)\b", line) and " in " in line:
+            return {kind if kind != "error" else "errors": int(n) for n, kind in PYTEST_COUNTS.findall(line)}
+    return None
 
 
 def _fmt_seconds(s: float) -> str:
@@ -143,8 +168,11 @@ def report(results: dict) -> list[str]:
              "of the checkout with a fresh virtual environment). The machine is shared: the load average says how",
              "busy it was (2 cores: a load above 2 means other jobs competed for them); an idle machine is faster.",
              "Installs take their wheels from pip's cache and the machine's package index: no download time.",
-             "Regenerate: `python -m training.measure_readme --out docs/readme_costs.md` (both parts), or one part",
-             "with `--parts main` or `--parts tests` (the other part's last measurement is kept).", ""]
+             "pip retries: connections pip retried (an index this machine cannot reach) before it went on with",
+             "the other sources; they are part of the step's time here.",
+             "Regenerate: `python -m training.measure_readme --out docs/readme_costs.md --readme README.md` (both",
+             "parts), or one part with `--parts main` or `--parts tests` (the other part's last measurement, kept in",
+             "readme_costs.json beside this file, stays).", ""]
     for part in ("main", "tests"):
         if part not in results:
             continue
@@ -161,40 +189,126 @@ def report(results: dict) -> list[str]:
             total += row["seconds"]
             load = f"{row['load']['mean']:.1f} / {row['load']['max']:.1f}" if "load" in row else ""
             size = f"{row['venv_bytes'] / 2**30:.2f} GiB" if "venv_bytes" in row else ""
-            lines.append(f"| `{row.get('run_as', row['step'])}` | {_fmt_seconds(row['seconds'])} | {row['rc']} | "
+            note = f" ({row['pip_retries']} pip retries)" if row.get("pip_retries") else ""
+            lines.append(f"| `{row.get('run_as', row['step'])}` | {_fmt_seconds(row['seconds'])}{note} | {row['rc']} | "
                          f"{load} | {size} |")
         ok = all(row.get("rc", 0) == 0 for row in r["steps"])
-        lines += ["", f"Total: {_fmt_seconds(total)}{'' if ok else ' (a step FAILED: see its exit code)'}.", ""]
+        lines += ["", f"Total: {_fmt_seconds(total)}{'' if ok else ' (a step FAILED: see its exit code)'}."]
+        counts = next((row["pytest"] for row in r["steps"] if row.get("pytest")), None)
+        if counts:
+            lines.append("Tests: " + ", ".join(f"{n} {kind}" for kind, n in counts.items()) + ".")
+        lines.append("")
     return lines
+
+
+README_MARKS = ("<!-- readme-costs:{part} -->", "<!-- /readme-costs:{part} -->")
+
+
+def _duration(s: float) -> str:
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} minutes"
+
+
+def _machine(result: dict) -> str:
+    """'AMD EPYC (2 logical cores)' from the measurement's machine line."""
+    line = next((ln for ln in result["machine"] if ln.startswith("- machine:")), "")
+    return line.split("CPU: ", 1)[-1] if "CPU: " in line else line.removeprefix("- machine: ")
+
+
+def readme_sentence(part: str, result: dict | None, readme: str) -> str:
+    """The README's cost sentence of `part`, from its measurement; where none was made for the README's
+    current command (or a step failed, or it was a --quick run), a sentence that says so and how to measure."""
+    steps = steps_of(readme_block(readme, part))
+    measured = (result is not None and not result.get("quick") and [r["step"] for r in result["steps"]] == steps
+                and all(r.get("rc", 0) == 0 for r in result["steps"]))
+    if not measured:
+        return (f"Not yet measured for the command below: `python -m training.measure_readme --parts {part} --out "
+                f"docs/readme_costs.md --readme README.md` measures it ([docs/readme_costs.md](docs/readme_costs.md)).")
+    timed = [r for r in result["steps"] if "seconds" in r]
+    install = [r for r in timed if shlex.split(r["step"])[0] == "pip" or r["step"].startswith("python3 -m venv")]
+    run = [r for r in timed if r["step"].startswith("python -m ")]
+    size = max((r["venv_bytes"] for r in timed if "venv_bytes" in r), default=0) / 2**30
+    loaded = [r for r in timed if "load" in r and r["seconds"] > 0]
+    weight = sum(r["seconds"] for r in loaded) or 1.0
+    mean = sum(r["load"]["mean"] * r["seconds"] for r in loaded) / weight
+    peak = max((r["load"]["max"] for r in loaded), default=0.0)
+    retries = sum(r.get("pip_retries", 0) for r in install)
+    hosts = sorted({re.sub(r"^https?://([^/]+).*", r"\1", a) for r in install if r.get("pip_retries")
+                    for a in shlex.split(r["step"]) if a.startswith("http")})
+    retry = (f"; {retries} connection retries to {', '.join(hosts) or 'an index'}, which this machine cannot reach, "
+             "before pip took its local wheels" if retries else "")
+    install_text = (f"{_duration(sum(r['seconds'] for r in install))} to install (a {size:.2f} GiB virtual "
+                    f"environment, wheels from this machine's cache and package indexes{retry})")
+    where = (f"measured by `python -m training.measure_readme` ([docs/readme_costs.md](docs/readme_costs.md)) on "
+             f"{_machine(result)}, {result.get('date', '?')}, load average {mean:.1f} on average (at most {peak:.1f}; "
+             "a load above the core count means other jobs competed for the cores)")
+    if part == "tests":
+        suite = next(r for r in run if r["step"].startswith("python -m pytest"))
+        counts = ", ".join(f"{n} {k}" for k, n in (suite.get("pytest") or {}).items())
+        return (f"Cost: {install_text}, and the suite {_duration(suite['seconds'])} ({counts}); {where}.")
+    parts = "".join(f", then {_duration(r['seconds'])} for `{r['step'].split()[2]}`" if i == 0 else
+                    f", {_duration(r['seconds'])} for `{r['step'].split()[2]}`" for i, r in enumerate(run))
+    total = sum(r["seconds"] for r in timed)
+    return f"Cost: {_duration(total)} in all: {install_text}{parts}; {where}."
+
+
+def update_readme(path: Path, results: dict) -> None:
+    """Rewrite each part's sentence between its markers; ValueError if a marker is missing."""
+    import textwrap
+    text = path.read_text()
+    for part in PARTS:
+        begin, end = (m.format(part=part) for m in README_MARKS)
+        if begin not in text or end not in text:
+            raise ValueError(f"{path}: no {begin} ... {end} markers")
+        head, rest = text.split(begin, 1)
+        _, tail = rest.split(end, 1)
+        sentence = textwrap.fill(readme_sentence(part, results.get(part), text), width=110, break_long_words=False,
+                                 break_on_hyphens=False)
+        text = f"{head}{begin}\n{sentence}\n{end}{tail}"
+    path.write_text(text)
+
+
+def readme_marked(text: str, part: str) -> str | None:
+    """The README's text between the markers of `part` (whitespace-normalised), or None."""
+    begin, end = (m.format(part=part) for m in README_MARKS)
+    if begin not in text or end not in text:
+        return None
+    return " ".join(text.split(begin, 1)[1].split(end, 1)[0].split())
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--parts", nargs="+", choices=list(PARTS), default=list(PARTS))
     ap.add_argument("--out", default=None, help="the report (default: runs/reports/readme_costs.md under the "
-                                                "working directory; --quick: a new temporary directory)")
+                                                "working directory; --quick: a new temporary directory); the "
+                                                "measurements go beside it (.json)")
+    ap.add_argument("--readme", default=None, help="also rewrite the cost sentences of this README (not with --quick)")
     ap.add_argument("--quick", action="store_true", help="the main job in the current environment, training cut short")
     ap.add_argument("--report-only", action="store_true", help="measure nothing: the report of the parts measured so far")
     args = ap.parse_args(argv)
     if args.quick and args.report_only:
         ap.error("--quick and --report-only exclude each other")
+    if args.quick and args.readme:
+        ap.error("--readme refuses --quick: a quick run never writes the README")
     from penny_env.analysis.common import report_path, write
     out = report_path(args.out, args.quick, "readme_costs.md")
-    store = (out.parent / "readme_costs_parts") if args.quick else Path("runs") / "readme_costs"
-    store.mkdir(parents=True, exist_ok=True)
+    store = out.with_suffix(".json")
+    results = json.loads(store.read_text()) if store.is_file() else {}
     readme = (ROOT / "README.md").read_text()
     parts = [] if args.report_only else ["main"] if args.quick else args.parts
     for part in parts:
         with tempfile.TemporaryDirectory(prefix=f"penny_env-readme-{part}-") as tmp:
-            res = run_part(part, readme, copy_checkout(Path(tmp)), quick=args.quick)
-        (store / f"{part}.json").write_text(json.dumps(res, indent=2))
-    results = {p: json.loads((store / f"{p}.json").read_text()) for p in PARTS if (store / f"{p}.json").is_file()}
+            results[part] = run_part(part, readme, copy_checkout(Path(tmp)), quick=args.quick)
+        store.parent.mkdir(parents=True, exist_ok=True)
+        store.write_text(json.dumps(results, indent=2))  # after each part: a later failure keeps it
     if not results:
         ap.error(f"no part measured yet in {store}: run without --report-only first")
     lines = report(results)
     write(str(out), lines)
     print("\n".join(lines))
-    print(f"wrote {out}")
+    print(f"wrote {out} (measurements: {store})")
+    if args.readme:
+        update_readme(Path(args.readme), results)
+        print(f"rewrote the cost sentences of {args.readme}")
     return results
 
 

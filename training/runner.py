@@ -4,13 +4,19 @@
     RUN_DIR/progress.csv     SB3's CSV log (train/* and eval/* rows)
     RUN_DIR/events.out.tfevents.*  TensorBoard events (``tensorboard --logdir RUN_DIR``)
     RUN_DIR/curve.csv        evaluation during training: timesteps, success_rate, mean_return
-    RUN_DIR/checkpoints/     model_<steps>_steps.zip every checkpoint_freq steps (SAC, when asked: and
-                             model_replay_buffer_<steps>_steps.pkl, for --resume)
+    RUN_DIR/checkpoints/     model_<steps>_steps.zip every checkpoint_freq steps and when training is
+                             interrupted (Ctrl-C), model_<steps>_steps.json the training time up to it
+                             (SAC, when asked: model_replay_buffer_<steps>_steps.pkl, for --resume; only
+                             the newest unless all are kept)
+    RUN_DIR/train_time.json  the whole run's training time, over its resumed parts
     RUN_DIR/best_model.zip   the model of the best evaluation so far (success rate, then mean return),
                              RUN_DIR/best.json its timesteps and scores
     RUN_DIR/model.zip        the final model (``python -m training.evaluate RUN_DIR``)
 
-training.train, training.study and training.evaluate all use this layout.
+training.train, training.study and training.evaluate all use this layout. Ctrl-C during training saves a
+checkpoint of the step it reached and raises TrainingInterrupted (a KeyboardInterrupt) naming it; a resumed
+run appends to progress.csv (its rows up to the checkpoint kept) and adds the time of the part before the
+checkpoint to its own.
 
 Seeds: the model (torch, action sampling), the training envs (sub-env i: seed + i) and the
 evaluation episodes (seeds from eval_seed(seed)) all derive from ``seed``; on CPU with one torch
@@ -29,6 +35,14 @@ import numpy as np
 ALGOS = ("ppo", "sac")
 # set by the runner itself, not hyperparameters
 _RESERVED = {"policy", "env", "seed", "verbose", "tensorboard_log", "device", "_init_setup_model"}
+
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """Ctrl-C during train_agent: the checkpoint saved at the step training reached."""
+
+    def __init__(self, checkpoint: Path, timesteps: int):
+        super().__init__(f"training interrupted at {timesteps} steps; checkpoint {checkpoint}")
+        self.checkpoint, self.timesteps = Path(checkpoint), timesteps
 
 
 def algo_class(algo: str):
@@ -169,14 +183,90 @@ def progress_lines_callback(total: int, every_seconds: float, curve=None, print_
     return ProgressLines()
 
 
+def _checkpoint_steps(path: Path) -> int:
+    part = path.stem.split("_")[-2]
+    return int(part) if part.isdigit() else -1
+
+
+def checkpoint_callback(save_freq: int, folder: Path, save_replay_buffer: bool, keep_replay_buffers: bool,
+                        seconds_before: float, t_start: float):
+    """SB3's CheckpointCallback that also records the run's training time at each checkpoint
+    (model_<steps>_steps.json: the time before this process plus this process's time since t_start),
+    keeps only the newest replay buffer unless keep_replay_buffers, and saves one more checkpoint on
+    demand (save_now: Ctrl-C)."""
+    import time
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    class TimedCheckpoints(CheckpointCallback):
+        def _on_step(self) -> bool:
+            if self.n_calls % self.save_freq == 0:
+                self.save_now()
+            return True
+
+        def save_now(self) -> Path:
+            path = Path(self._checkpoint_path(extension="zip"))
+            self.model.save(path)
+            has_buffer = getattr(self.model, "replay_buffer", None) is not None
+            if self.save_replay_buffer and has_buffer:
+                buffer = Path(self._checkpoint_path("replay_buffer_", extension="pkl"))
+                self.model.save_replay_buffer(buffer)
+                if not keep_replay_buffers:  # a buffer holds up to buffer_size transitions: tens of MB each
+                    for old in Path(self.save_path).glob("model_replay_buffer_*_steps.pkl"):
+                        if old != buffer:
+                            old.unlink()
+            path.with_suffix(".json").write_text(json.dumps(
+                {"timesteps": int(self.num_timesteps), "train_seconds": seconds_before + time.perf_counter() - t_start}))
+            return path
+
+    return TimedCheckpoints(save_freq, str(folder), name_prefix="model", save_replay_buffer=save_replay_buffer)
+
+
+def seconds_before(checkpoint: Path) -> float | None:
+    """The run's training time up to `checkpoint` (its .json), or None (a checkpoint without the record)."""
+    record = Path(checkpoint).with_suffix(".json")
+    if not record.is_file():
+        return None
+    try:
+        return float(json.loads(record.read_text())["train_seconds"])
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+def progress_csv(path: Path, keep_until: int | None):
+    """SB3's CSV output (progress.csv). A resumed run (keep_until: the checkpoint's steps) keeps the earlier
+    rows up to that step and their columns, and appends; SB3's own CSV output truncates the file."""
+    from stable_baselines3.common.logger import CSVOutputFormat
+
+    keys, rows = [], []
+    if keep_until is not None and path.is_file():
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            keys = list(reader.fieldnames or [])
+            for row in reader:
+                steps = row.get("time/total_timesteps") or ""
+                try:
+                    if steps and float(steps) > keep_until:  # logged after the checkpoint: done again now
+                        continue
+                except ValueError:
+                    pass
+                rows.append(row)
+    out = CSVOutputFormat(str(path))
+    if keys:
+        out.keys = keys
+        writer = csv.writer(out.file, lineterminator="\n")  # SB3 rewrites the file line by line on new columns
+        writer.writerow(keys)
+        writer.writerows([[row.get(k) or "" for k in keys] for row in rows])
+        out.file.flush()
+    return out
+
+
 def latest_checkpoint(path) -> Path:
     """The model zip to resume from: PATH itself (a .zip), or the newest checkpoint of a run folder
     (PATH/checkpoints/model_<steps>_steps.zip, by steps). ValueError if there is none."""
     path = Path(path)
     if path.is_file():
         return path
-    found = sorted(Path(path, "checkpoints").glob("model_*_steps.zip"),
-                   key=lambda p: int(p.stem.split("_")[-2]) if p.stem.split("_")[-2].isdigit() else -1)
+    found = sorted(Path(path, "checkpoints").glob("model_*_steps.zip"), key=_checkpoint_steps)
     if not found:
         raise ValueError(f"resume: {path} is neither a model .zip nor a run folder with checkpoints/model_*_steps.zip")
     return found[-1]
@@ -185,24 +275,30 @@ def latest_checkpoint(path) -> Path:
 def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_envs: int = 8,
                 hyperparameters: dict | None = None, eval_points: int = 10, eval_episodes: int = 32,
                 checkpoints: int = 2, *, checkpoint_freq: int | None = None, save_replay_buffer: bool = False,
-                resume=None, progress: str | None = None, progress_seconds: float = 30.0):
+                keep_replay_buffers: bool = False, resume=None, progress: str | None = None,
+                progress_seconds: float = 30.0, extra_callbacks=()):
     """Train, log, checkpoint and save; returns the model.
 
     checkpoint_freq: env steps between checkpoints (default: timesteps / checkpoints);
     save_replay_buffer: SAC checkpoints also save the replay buffer (what --resume needs to go on
-    exactly where it stopped); resume: a checkpoint .zip or a run folder (its newest checkpoint):
-    the model (and the replay buffer saved with it) is loaded and trained on up to `timesteps` in all;
-    progress: None (silent), "bar" (SB3's progress bar, for a terminal) or "lines" (a line every
-    progress_seconds)."""
+    exactly where it stopped), only the newest one unless keep_replay_buffers; resume: a checkpoint .zip
+    or a run folder (its newest checkpoint): the model (and the replay buffer saved with it) is loaded
+    and trained on up to `timesteps` in all, progress.csv continued; progress: None (silent), "bar"
+    (SB3's progress bar, for a terminal) or "lines" (a line every progress_seconds). Ctrl-C during
+    training saves a checkpoint and raises TrainingInterrupted. RUN_DIR/train_time.json gets the run's
+    training time: this call's wall time plus, when resumed, the time recorded with the checkpoint."""
+    import time
+
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.logger import Logger, make_output_format
 
     hyper = copy.deepcopy(dict(hyperparameters or {}))  # SB3 writes into policy_kwargs (use_sde): not into the caller's job
     check_hyperparameters(algo, hyper)
     if progress not in (None, "bar", "lines"):
         raise ValueError(f"progress must be None, 'bar' or 'lines', got {progress!r}")
     Algo = algo_class(algo)
+    t_start = time.perf_counter()
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
@@ -210,6 +306,7 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
     cfg = {"env_id": env_id, "algo": algo, "seed": seed, "timesteps": timesteps, "num_envs": num_envs,
            "hyperparameters": hyper}
     (run_dir / "config.json").write_text(json.dumps(cfg, indent=2))
+    before = 0.0
     if resume is None:
         model = Algo("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", **hyper)
     else:
@@ -218,22 +315,43 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
         buffer = ckpt.with_name(ckpt.name.replace("model_", "model_replay_buffer_").replace(".zip", ".pkl"))
         if hasattr(model, "load_replay_buffer") and buffer.is_file():
             model.load_replay_buffer(buffer)
-    formats = ["csv"] + (["tensorboard"] if _tensorboard_installed() else [])
-    model.set_logger(configure(str(run_dir), formats))
+        elif hasattr(model, "load_replay_buffer"):
+            print(f"[train] {buffer.name}: no replay buffer saved with this checkpoint (only the newest is kept "
+                  "unless all are asked for): SAC goes on with an empty buffer", flush=True)
+        before = seconds_before(ckpt)
+    resumed_at = None if resume is None else int(model.num_timesteps)
+    formats = [progress_csv(run_dir / "progress.csv", resumed_at)]
+    if _tensorboard_installed():
+        formats.append(make_output_format("tensorboard", str(run_dir)))
+    model.set_logger(Logger(str(run_dir), formats))
     every = max(1, timesteps // max(1, eval_points))
     ckpt_steps = checkpoint_freq or max(1, timesteps // max(1, checkpoints))
     curve = success_eval_callback(env_id, every, eval_episodes, eval_seed(seed) + 5_000, run_dir / "curve.csv",
                                   run_dir / "best_model.zip")
-    callbacks = [curve, CheckpointCallback(max(1, ckpt_steps // num_envs), str(run_dir / "checkpoints"),
-                                           name_prefix="model", save_replay_buffer=save_replay_buffer)]
+    saver = checkpoint_callback(max(1, ckpt_steps // num_envs), run_dir / "checkpoints", save_replay_buffer,
+                                keep_replay_buffers, before or 0.0, t_start)
+    callbacks = [curve, saver]
     if progress == "lines":
         callbacks.append(progress_lines_callback(timesteps, progress_seconds, curve))
+    callbacks.extend(extra_callbacks)
     remaining = timesteps - model.num_timesteps
     if remaining > 0:
-        model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=resume is None,
-                    progress_bar=progress == "bar")
+        try:
+            model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
+                        reset_num_timesteps=resume is None, progress_bar=progress == "bar")
+        except KeyboardInterrupt:
+            saver.init_callback(model)  # (set when learn started; again in case Ctrl-C came before)
+            checkpoint = saver.save_now()
+            model.logger.close()
+            venv.close()
+            raise TrainingInterrupted(checkpoint, int(model.num_timesteps)) from None
     model.save(run_dir / "model.zip")
+    model.logger.close()
     venv.close()
+    this_run = time.perf_counter() - t_start
+    (run_dir / "train_time.json").write_text(json.dumps({
+        "train_seconds": None if before is None else before + this_run, "this_process_seconds": this_run,
+        "resumed_at": resumed_at, "seconds_before": before, "timesteps": int(model.num_timesteps)}, indent=2))
     return model
 
 

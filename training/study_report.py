@@ -297,7 +297,7 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
                   "same draw in every cell): pairs that both cells solved, mean time to success on the table minus "
                   "on the plane with its 95 % bootstrap interval (over pairs; negative: the table is faster), and the "
                   "share of those pairs where the table was faster.", "",
-                  "| table | agent | pairs solved in both | time table - plane [s] [95 % CI] | table faster |",
+                  "| table | agent | pairs solved in both | time table - plane (s) [95 % CI] | table faster |",
                   "| --- | --- | ---: | --- | ---: |"]
         for r in paired:
             diff = (f"{r['mean_diff_s']:+.2f} [{r['ci_low']:+.2f}, {r['ci_high']:+.2f}]" if r["pairs"] else "-")

@@ -2,7 +2,7 @@
 zero actions on fresh seeds.
 
     python -m training.train --config configs/train/ppo_reach_ellipse.yaml [--quick] [--out runs/NAME]
-                             [--resume RUN_DIR_OR_CHECKPOINT] [--progress-seconds 30]
+                             [--resume RUN_DIR_OR_CHECKPOINT] [--progress-seconds 30] [--keep-replay-buffers]
 
 The config (YAML) names env_id, algo (ppo or sac), num_envs, total_timesteps, seed,
 eval_episodes, algo_kwargs and policy_kwargs, and optionally checkpoint_freq (env steps between
@@ -16,12 +16,17 @@ events (``tensorboard --logdir runs``), plus results.json and results.md: the tr
 against zero and random actions on fresh seeds. The folder is printed at the start and the end.
 On a terminal SB3's progress bar shows; elsewhere (nohup, a scheduler, CI) a line every
 --progress-seconds gives steps, steps/s, the last evaluation's success and the time left.
---resume goes on from a checkpoint (a run folder: its newest; SAC: with its replay buffer).
+--resume goes on from a checkpoint (a run folder: its newest; SAC: with its replay buffer), appends to
+progress.csv and reports the whole run's training time in results.md. Ctrl-C during training saves a
+checkpoint and prints one line with the exact command that resumes the run. SAC checkpoints keep only the
+newest replay buffer (each holds up to buffer_size transitions) unless --keep-replay-buffers.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import shlex
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -107,9 +112,10 @@ def progress_mode(stream=None) -> str:
 
 
 def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None = None,
-          progress_seconds: float = 30.0):
+          progress_seconds: float = 30.0, keep_replay_buffers: bool = False):
     """Train into the run folder `out` (training.runner's layout), then compare the trained policy
-    with zero and random actions; returns the results (also results.json, results.md)."""
+    with zero and random actions; returns the results (also results.json, results.md). Ctrl-C during
+    training raises training.runner.TrainingInterrupted after saving a checkpoint."""
     from training.runner import train_agent
 
     out = Path(out)
@@ -127,16 +133,19 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
                         eval_points=2 if quick else cfg["curve_points"],
                         eval_episodes=8 if quick else cfg["curve_episodes"],
                         checkpoint_freq=total // 2 if quick else cfg["checkpoint_freq"],
-                        save_replay_buffer=cfg["algo"] == "sac", resume=resume,
-                        progress=progress_mode() if progress is None else progress,
+                        save_replay_buffer=cfg["algo"] == "sac", keep_replay_buffers=keep_replay_buffers,
+                        resume=resume, progress=progress_mode() if progress is None else progress,
                         progress_seconds=progress_seconds)
-    seconds = time.perf_counter() - t0
+    this_process = time.perf_counter() - t0
+    timing = json.loads((out / "train_time.json").read_text())
+    seconds = timing["train_seconds"]  # the whole run, resumed parts included (None: the earlier part's time unknown)
     from gymnasium.spaces import Box
     act_space = Box(-1.0, 1.0, model.action_space.shape, np.float32)
     rng = np.random.default_rng(cfg["seed"] + 1)
     eval_seed = 10_000 + cfg["seed"]
     results = {
         "config": cfg, "quick": quick, "timesteps": total, "train_seconds": seconds,
+        "this_process_seconds": this_process, "resumed_at": timing["resumed_at"],
         "trained": evaluate(cfg["env_id"], lambda o: model.predict(o, deterministic=True)[0], n_eval, eval_seed),
         "random": evaluate(cfg["env_id"], lambda o: rng.uniform(-1, 1, (len(o),) + act_space.shape).astype(np.float32),
                            n_eval, eval_seed),
@@ -145,8 +154,16 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
     (out / "results.json").write_text(json.dumps(results, indent=2))
     rows = [f"| {name} | {r['mean_return']:.3f} | {r['success_rate']:.3f} | {r['mean_length']:.1f} |"
             for name, r in ((k, results[k]) for k in ("trained", "random", "zero"))]
+    if timing["resumed_at"] is None:
+        took = f"in {seconds:.0f} s"
+    elif seconds is None:
+        took = (f"resumed at {timing['resumed_at']} steps from a checkpoint without a time record: "
+                f"{this_process:.0f} s in this process, the earlier part's time unknown")
+    else:
+        took = (f"in {seconds:.0f} s of training in all (resumed at {timing['resumed_at']} steps: "
+                f"{timing['seconds_before']:.0f} s before, {this_process:.0f} s in this process)")
     md = [f"# {cfg['algo'].upper()} on {cfg['env_id']}", "",
-          f"{total} timesteps on {cfg['num_envs']} vectorized envs in {seconds:.0f} s (seed {cfg['seed']}); "
+          f"{total} timesteps on {cfg['num_envs']} vectorized envs {took} (seed {cfg['seed']}); "
           f"evaluation on {n_eval} episodes with seeds from {eval_seed}.", "",
           "| policy | mean return | success rate | mean length |", "|---|---|---|---|", *rows, ""]
     (out / "results.md").write_text("\n".join(md))
@@ -166,6 +183,8 @@ def main(argv=None):
                     help="go on from a checkpoint: a model_<steps>_steps.zip or a run folder (its newest checkpoint)")
     ap.add_argument("--progress-seconds", type=float, default=30.0,
                     help="off a terminal: seconds between progress lines (default 30)")
+    ap.add_argument("--keep-replay-buffers", action="store_true",
+                    help="SAC: keep the replay buffer of every checkpoint (default: only the newest)")
     args = ap.parse_args(argv)
     try:
         cfg = load_config(args.config, args.set)
@@ -182,7 +201,38 @@ def main(argv=None):
         out = Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / Path(args.config).stem
     else:
         out = (Path("runs") / Path(args.config).stem).resolve()
-    return train(cfg, out, quick=args.quick, resume=args.resume, progress_seconds=args.progress_seconds)
+    from training.runner import TrainingInterrupted, latest_checkpoint
+    try:
+        return train(cfg, out, quick=args.quick, resume=args.resume, progress_seconds=args.progress_seconds,
+                     keep_replay_buffers=args.keep_replay_buffers)
+    except KeyboardInterrupt as exc:  # Ctrl-C: one line, no traceback
+        if isinstance(exc, TrainingInterrupted):
+            where = f"interrupted at {exc.timesteps:,} steps, checkpoint saved: {exc.checkpoint}"
+        elif (out / "model.zip").is_file() and not (out / "results.md").is_file():
+            where = f"interrupted after training, during the final evaluation: the model is {out / 'model.zip'}"
+        else:
+            where = "interrupted"
+        try:
+            latest_checkpoint(out)
+        except ValueError:
+            print(f"[train] {where}; no checkpoint yet: nothing to resume", file=sys.stderr, flush=True)
+        else:
+            print(f"[train] {where}; resume with: {resume_command(args, out)}", file=sys.stderr, flush=True)
+        sys.exit(130)
+
+
+def resume_command(args, out: Path) -> str:
+    """The command line that goes on with this run from its newest checkpoint."""
+    argv = ["python", "-m", "training.train", "--config", args.config]
+    for item in args.set:
+        argv += ["--set", item]
+    if args.quick:
+        argv.append("--quick")
+    if args.progress_seconds != 30.0:
+        argv += ["--progress-seconds", f"{args.progress_seconds:g}"]
+    if args.keep_replay_buffers:
+        argv.append("--keep-replay-buffers")
+    return shlex.join(argv + ["--out", str(out), "--resume", str(out)])
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ from .. import batch
 from ..physics import PennyParams, make_law, make_table
 from . import boundary_map as bm
 
-TABLES = {"circle": {"kind": "circle", "r": 0.2},
+TABLES = {"circle": {"kind": "circle", "radius": 0.2},
           "ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2},
           "stadium": {"kind": "stadium", "radius": 0.1, "length": 0.15},
           "rounded rectangle": {"kind": "rounded_rectangle", "width": 0.3, "height": 0.2, "radius": 0.04}}

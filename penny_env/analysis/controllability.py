@@ -27,7 +27,7 @@ import numpy as np
 # scene name -> (table spec or None, law)
 SCENES = {
     "open plane": (None, "elastic"),
-    "circle r = 0.2, elastic": ({"kind": "circle", "r": 0.2}, "elastic"),
+    "circle r = 0.2, elastic": ({"kind": "circle", "radius": 0.2}, "elastic"),
     "ellipse 0.15 x 0.2, elastic": ({"kind": "ellipse", "a": 0.15, "b": 0.2}, "elastic"),
     "ellipse 0.15 x 0.2, plastic": ({"kind": "ellipse", "a": 0.15, "b": 0.2}, "plastic"),
     "stadium r = 0.1, length 0.1, elastic": ({"kind": "stadium", "radius": 0.1, "length": 0.1}, "elastic"),

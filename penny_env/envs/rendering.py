@@ -266,7 +266,8 @@ class Renderer:
             import pygame
         except ImportError as exc:
             from gymnasium.error import DependencyNotInstalled
-            raise DependencyNotInstalled('pygame-ce is needed for render_mode="human": pip install "penny-env[render]"') from exc
+            raise DependencyNotInstalled('pygame-ce is needed for render_mode="human": the render extra '
+                                          '(in a clone of penny_env: pip install -e ".[render]")') from exc
         if self.window is None:
             global _warned_no_display
             if not _has_display() and not _warned_no_display:

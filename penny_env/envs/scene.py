@@ -21,7 +21,7 @@ from typing import Any
 
 from ..physics import PennyParams, make_law, make_table
 from ..physics.params import MAX_ANGULAR_SPEED
-from ..physics.tables import Table
+from ..physics.tables import TABLE_KINDS, Table
 from ..physics.tables.base import LENGTH_RANGE
 from ..physics.validation import check_actuation, check_table, step_speed_limits
 from .config import ConfigError, ConfigTypeError, UnknownFieldError, number
@@ -79,7 +79,7 @@ PARAM_DEFAULTS = {name: getattr(PennyParams(), name) for name in ("R", "m", "I",
 class Scene:
     """The physical setting of an environment (see penny_env/presets/scenes/*.yaml).
 
-    table:        {"kind": "ellipse", "a", "b"} | {"kind": "circle", "r"} |
+    table:        {"kind": "ellipse", "a", "b"} | {"kind": "circle", "radius"} |
                   {"kind": "stadium", "radius", "length"} |
                   {"kind": "rounded_rectangle", "width", "height", "radius"} | any registered kind
                   (physics.tables.TABLE_KINDS) | {"kind": "none"} (the open plane); or a table object
@@ -268,7 +268,14 @@ def _merge(base: dict, over: dict, owner: str, allowed: tuple) -> dict:
         if k in _MERGED and isinstance(v, dict) and isinstance(out.get(k), dict):
             out[k] = {**out[k], **v}
         elif k == "table" and isinstance(v, dict) and "kind" not in v and isinstance(out.get(k), dict):
-            out[k] = {**out[k], **v}
+            merged = {**out[k], **v}
+            # a deprecated field name in the override replaces the preset's field it aliases (Circle: r -> radius)
+            kind = merged.get("kind")
+            aliases = getattr(TABLE_KINDS.get(kind) if isinstance(kind, str) else None, "field_aliases", {})
+            for old, new in aliases.items():
+                if old in v and new not in v:
+                    merged.pop(new, None)
+            out[k] = merged
         else:
             out[k] = v
     return out

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -79,17 +80,35 @@ class Ellipse(Table):
 
 
 class Circle(Ellipse):
-    """Circular table x^2 + y^2 < r^2 (the paper's circle, a = b = r)."""
+    """Circular table x^2 + y^2 < radius^2 (the paper's circle, a = b = radius).
+
+    ``radius`` is the name every round table uses (``Stadium(radius, length)``,
+    ``RoundedRectangle(width, height, radius)``); ``r`` (``Circle(r=0.2)``, ``{"kind": "circle", "r": 0.2}``,
+    ``circle.r``) is its deprecated alias and warns (DeprecationWarning)."""
 
     name = "circle"
+    field_aliases = {"r": "radius"}  # deprecated name -> name (a scene's partial table override honours it)
 
-    def __init__(self, r: float):
-        r = length("Circle", "r", r)
-        super().__init__(r, r)
-        self.r = r
+    def __init__(self, radius: float | None = None, *, r: float | None = None):
+        if r is not None:
+            if radius is not None:
+                raise ValueError("Circle: got both radius and r (r is the deprecated alias of radius): give radius only")
+            warnings.warn("Circle(r=...) is deprecated: use Circle(radius=...)", DeprecationWarning, stacklevel=2)
+            radius = r
+        elif radius is None:
+            raise TypeError("Circle.__init__() missing 1 required positional argument: 'radius'")
+        radius = length("Circle", "radius", radius)
+        super().__init__(radius, radius)
+        self.radius = radius
+
+    @property
+    def r(self) -> float:
+        """Deprecated alias of :attr:`radius`."""
+        warnings.warn("Circle.r is deprecated: use Circle.radius", DeprecationWarning, stacklevel=2)
+        return self.radius
 
     def _fields(self):
-        return {"r": self.r}
+        return {"radius": self.radius}
 
 
 register_table("ellipse", Ellipse)
