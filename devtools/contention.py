@@ -7,7 +7,7 @@ cores with it, and how its idle threads wait decides the throughput: OpenMP's th
 (OMP_WAIT_POLICY=active in GNU OpenMP), which starves the process that holds the core they wait on.
 For each setup, in its own process (the threading layer is chosen once per process):
 
-* ``penny_env default``: no variable set, the setup penny_env picks (physics/parallel.py);
+* ``penny_env default``: no variable set, the setup penny_env picks (backends/threads.py);
 * ``omp spinning``: NUMBA_THREADING_LAYER=omp, OMP_WAIT_POLICY=active (GNU OpenMP's default: numba's own
   setup where its OpenMP layer loads, before penny_env set the policy), threads spinning;
 * ``omp passive``: the same with OMP_WAIT_POLICY=passive;
@@ -64,7 +64,7 @@ for r in range(repeats):
 import numba
 try:
     layer = numba.threading_layer()
-except ValueError:  # no parallel call ran: fewer pennies than parallel.SERIAL_BELOW run on the calling thread
+except ValueError:  # no parallel call ran: fewer pennies than threads.SERIAL_BELOW run on the calling thread
     layer = "serial"
 print(json.dumps({"rate": best, "layer": layer, "threads": numba.get_num_threads()}))
 """

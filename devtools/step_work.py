@@ -36,10 +36,10 @@ def counters(n, steps):
         setattr(mod, name, counted)
         return f
 
-    saved = [(scalar, "end_plain1", wrap(scalar, "end_plain1", "ends")),
-             (scalar, "first_impact_m", wrap(scalar, "first_impact_m", "searches")),
+    saved = [(scalar, "end_search_step", wrap(scalar, "end_search_step", "ends")),
+             (scalar, "first_impact_search", wrap(scalar, "first_impact_search", "searches")),
              (scalar, "advance_into", wrap(scalar, "advance_into", "loops")),
-             (scalar, "with_curvature1", wrap(scalar, "with_curvature1", "curv"))]
+             (scalar, "end_search_step_curved", wrap(scalar, "end_search_step_curved", "curv"))]
     try:
         for env_id in PRESETS:
             cnt.clear()

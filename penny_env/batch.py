@@ -189,7 +189,7 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     never over pennies). controls: None (free motion), (K, 2) torques shared by all pennies or
     (K, N, 2) per penny, row k held on [k, k+1) control_dt; K control_dt must cover t_final.
     backend: "numba" runs the physics' per-penny event loop compiled and in parallel over the pennies
-    (physics/compiled.py), "cuda" the same functions on a GPU, one thread per penny (numpy in and out,
+    (backends/physics.py), "cuda" the same functions on a GPU, one thread per penny (numpy in and out,
     copied each interval; docs/gpu.md), "python" the same loop in plain Python (slow: for debugging and tests);
     "auto" (default) takes numba where it is installed and the table compiles (with a one-time
     warning otherwise). Both give bitwise the same results (tests/test_compiled.py). A law or a table that

@@ -1,5 +1,5 @@
 """The compiled backend (numba) runs physics/scalar.py's functions: it must give the plain-Python
-per-penny loop's results bitwise (advance_pennies(backend="python") and advance1), impacts included,
+per-penny loop's results bitwise (advance_pennies(backend="python") and advance_interval), impacts included,
 and refuse what it cannot compile."""
 import math
 
@@ -15,7 +15,7 @@ from penny_env.backends.choice import available
 from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis_small
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import SolverSettings
-from penny_env.physics.scalar import advance1, flow1
+from penny_env.physics.scalar import advance_interval, flow_penny
 from conftest import random_inside_state
 
 pytestmark = pytest.mark.skipif(not available(), reason="numba is not installed")
@@ -49,7 +49,7 @@ def test_compiled_equals_python_loop_and_scalar(seed, table, law, steer, dt):
         assert np.array_equal(env, log.env) and np.array_equal(times, log.time)
         assert np.array_equal(ends, log.end) and np.array_equal(posts, log.state)
     i = int(rng.integers(n))
-    s1, impacts, _, _ = advance1(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, SET)
+    s1, impacts, _, _ = advance_interval(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, SET)
     assert np.array_equal(np.array(s1), out[:, i])
 
 
@@ -74,7 +74,7 @@ def test_compiled_flow_on_the_plane_equals_numpy_flow(seed, steer):
     assert log is None
     assert np.array_equal(out, flow(S, acc1, acc2, 0.37, 0.01))
     fns = batch_entry_points("cpu", -1).functions  # the open plane's variant
-    assert fns["flow1"](tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01) == flow1(tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01)
+    assert fns["flow_penny"](tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01) == flow_penny(tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01)
 
 
 @pytest.mark.parametrize("cis, limit", [(cis_small, SMALL_ANGLE), (cis_medium, MEDIUM_ANGLE)])

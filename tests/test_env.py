@@ -117,7 +117,7 @@ def test_open_plane_never_searches(monkeypatch):
     from penny_env.physics import scalar
     calls = []
     record = lambda *a, **k: calls.append(1)  # noqa: E731
-    for name in ("certified_free_trig", "advance_into", "advance_through_into"):  # run_interval's callees
+    for name in ("period_is_free", "advance_into", "advance_through_into"):  # run_interval's callees
         monkeypatch.setattr(scalar, name, record)
     env = gym.make("PennyReach-Plane-v0", backend="python")
     env.reset(seed=0)

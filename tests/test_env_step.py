@@ -62,12 +62,12 @@ def test_transition_is_the_event_loop_and_certified_periods_are_flows(ti, law):
                                            0, scalar.NO_ARC)
         n = int(buf.count[0])
         times, ends = buf.time[:, 0], buf.end[:, 0]
-        ref, imps, _, elapsed = scalar.advance_m(s, acc1, acc2, p.dt, m, 0)
+        ref, imps, _, elapsed = scalar.advance_listing(s, acc1, acc2, p.dt, m, 0)
         assert np.array_equal(_bits(s1), _bits(ref)) and n == len(imps) and elapsed == p.dt == elapsed1
         assert np.array_equal(_bits(times[:n]), _bits([i[0] for i in imps])) and list(ends[:n]) == [i[1] for i in imps]
-        if scalar.certified_free1(s, acc1, acc2, p.dt, m):
+        if scalar.period_is_free(s, math.cos(s[3]), math.sin(s[3]), acc1, acc2, p.dt, m):
             certified += 1
-            assert n == 0 and np.array_equal(_bits(s1), _bits(scalar.flow1(s, acc1, acc2, p.dt, m.R)))
+            assert n == 0 and np.array_equal(_bits(s1), _bits(scalar.flow_penny(s, acc1, acc2, p.dt, m.R)))
         impacts += n
     assert 0 < certified < len(states) and impacts > 5
 
@@ -105,7 +105,7 @@ def test_transition_stops_where_the_event_cap_stops_the_loop(monkeypatch):
     checked = 0
     for s in _random_inside(rng, core.table, 20):
         s = s[:4] + (30.0, s[5])
-        ref, imps, _, elapsed = scalar.advance_m(s, 0.0, 3.0, p.dt, m, 1)
+        ref, imps, _, elapsed = scalar.advance_listing(s, 0.0, 3.0, p.dt, m, 1)
         with monkeypatch.context() as mp:
             mp.setattr(scalar, "advance_into", one_impact_per_call)
             calls.clear()

@@ -198,7 +198,7 @@ POISON = """
 
 def test_a_broken_law_never_enters_the_builds_of_other_envs():
     # the compiled builds hold the built-in laws and, besides them, only the law their Model runs
-    # (physics/compiled.py build_laws): one bad law used to break every env in the process, built-in ids too
+    # (backends/physics.py build_laws): one bad law used to break every env in the process, built-in ids too
     pytest.importorskip("numba")
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_THREADING_LAYER"}
     out = subprocess.run([sys.executable, "-c", textwrap.dedent(POISON)], cwd=ROOT, env=dict(env, PYTHONPATH=str(ROOT)),

@@ -1,6 +1,6 @@
 """The compiled parallel loops survive what deployments do: fork() after a parallel call, two Python
 threads stepping two vector envs (and batch calls), and a user's own threading layer choice
-(physics/parallel.py). Each case runs in a subprocess, so an abort fails the test, not the suite."""
+(backends/threads.py). Each case runs in a subprocess, so an abort fails the test, not the suite."""
 import os
 import subprocess
 import sys
@@ -206,7 +206,7 @@ FORK_WHILE_STEPPING = """
     held, release = threading.Event(), threading.Event()
 
     def hold():
-        with parallel.PARALLEL_LOCK:
+        with threads.PARALLEL_LOCK:
             held.set()
             release.wait()
     t = threading.Thread(target=hold, daemon=True)
@@ -238,7 +238,7 @@ FORK_WHILE_STEPPING = """
 def test_a_child_forked_while_another_thread_steps_uses_penny_env_at_once(layer):
     # repro_fork_lock (issue 31): under workqueue and TBB a child forked while a background thread ran
     # PennyVectorEnv.step blocked for more than 20 s in 2 of 3 tries: it inherited PARALLEL_LOCK held by a thread
-    # it does not have. The child now gets a fresh lock and runs serially on every layer (physics/parallel.py).
+    # it does not have. The child now gets a fresh lock and runs serially on every layer (backends/threads.py).
     code, out = run_script(FORK_WHILE_STEPPING, **({"NUMBA_THREADING_LAYER": layer} if layer else {}))
     if layer and code != 0 and ("No threading layer could be loaded" in out or "libtbb" in out
                                 or "threading layer" in out and "not" in out.lower()):

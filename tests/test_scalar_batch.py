@@ -8,13 +8,13 @@ from penny_env.physics import advance_pennies, flow
 from penny_env.physics.laws import make_law
 from penny_env.backends.choice import available
 from penny_env.physics.params import SolverSettings
-from penny_env.physics.scalar import advance1, flow1
+from penny_env.physics.scalar import advance_interval, flow_penny
 from conftest import random_inside_state
 
 TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011),
           pe.RoundedRectangle(0.3, 0.2, 0.05)]
 LAWS = ["elastic", "plastic", 0.4]
-# the batch runs compiled where numba is installed (the plain-Python batch is advance1 in a loop)
+# the batch runs compiled where numba is installed (the plain-Python batch is advance_interval in a loop)
 BACKEND = "numba" if available() else "python"
 
 
@@ -31,7 +31,7 @@ def test_advance_scalar_equals_batch(seed, table, law, steer, dt):
     acc2 = rng.normal(0, 3, n)
     batch, log, elapsed = advance_pennies(S, acc1, acc2, dt, params, table, law, settings, backend=BACKEND)
     for i in range(n):
-        s1, impacts, rests, el = advance1(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, settings)
+        s1, impacts, rests, el = advance_interval(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, settings)
         assert np.array_equal(np.array(s1), batch[:, i])
         mine = log.env == i
         assert [t for t, _, _ in impacts] == list(log.time[mine])
@@ -50,7 +50,7 @@ def test_flow_scalar_equals_batch(seed, steer):
     t = rng.uniform(0, 5, n)
     batch = flow(S, acc1, acc2, t, 0.01)
     for i in range(n):
-        assert np.array_equal(np.array(flow1(tuple(S[:, i]), acc1[i], acc2[i], t[i], 0.01)), batch[:, i])
+        assert np.array_equal(np.array(flow_penny(tuple(S[:, i]), acc1[i], acc2[i], t[i], 0.01)), batch[:, i])
 
 
 def test_batch_result_independent_of_batch_composition():

@@ -11,7 +11,7 @@ from penny_env.backends.choice import available as numba_available
 from penny_env.physics.flows import kinetic_energy
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MIN_GAP
-from penny_env.physics.scalar import (NO_ARC, advance_m, advance_through_into, advance_through_m, impact_buffers, impacts_of,
+from penny_env.physics.scalar import (NO_ARC, advance_listing, advance_through_into, advance_through_listing, impact_buffers, impacts_of,
                                       overflowed, scalar_model)
 
 PARAMS = pe.PennyParams()
@@ -70,16 +70,16 @@ class _ProtocolEllipse:
 
 @pytest.mark.parametrize("table", BUILT_IN, ids=lambda t: type(t).__name__)
 def test_event_loop_resumes_after_the_cap(table):
-    """advance_m stops at the cap right after an impact (speeds untouched, elapsed < dt);
-    advance_through_m resumes to the interval's end with the same impacts as one uncapped call."""
+    """advance_listing stops at the cap right after an impact (speeds untouched, elapsed < dt);
+    advance_through_listing resumes to the interval's end with the same impacts as one uncapped call."""
     s0 = (0.0, 0.0, 0.0, 0.3, 10.0, 0.2)
     capped = scalar_model(PARAMS, table, ELASTIC, pe.SolverSettings(max_events_per_interval=3))
-    s, impacts, rests, elapsed = advance_m(s0, 0.0, 0.0, 5.0, capped, 0)
+    s, impacts, rests, elapsed = advance_listing(s0, 0.0, 0.0, 5.0, capped, 0)
     assert len(impacts) == 3 and elapsed < 5.0 and not rests
     assert elapsed == impacts[-1][0] and s == impacts[-1][2]
     assert energy(s)[0] == pytest.approx(energy(s0)[0], rel=1e-13)
-    s, impacts, rests, elapsed = advance_through_m(s0, 0.0, 0.0, 5.0, capped)
-    free = advance_m(s0, 0.0, 0.0, 5.0, scalar_model(PARAMS, table, ELASTIC, pe.SolverSettings()), 0)
+    s, impacts, rests, elapsed = advance_through_listing(s0, 0.0, 0.0, 5.0, capped)
+    free = advance_listing(s0, 0.0, 0.0, 5.0, scalar_model(PARAMS, table, ELASTIC, pe.SolverSettings()), 0)
     assert elapsed == 5.0 and len(impacts) == len(free[1]) > 3
     np.testing.assert_allclose([i[0] for i in impacts], [i[0] for i in free[1]], rtol=0, atol=1e-12)
     np.testing.assert_allclose(s, free[0], rtol=0, atol=1e-10)
@@ -253,13 +253,13 @@ def test_simulate_and_batch_are_bitwise_equal(backend, table, law):
 
 
 def test_advance1_runs_the_whole_interval_unless_told_to_stop():
-    """Callers that take advance1's state as the interval's end (analysis.baselines) get the whole
-    interval: advance1 resumes past the event cap unless stop_after is given."""
-    from penny_env.physics.scalar import advance1
+    """Callers that take advance_interval's state as the interval's end (analysis.baselines) get the whole
+    interval: advance_interval resumes past the event cap unless stop_after is given."""
+    from penny_env.physics.scalar import advance_interval
     s0 = (0.0, 0.0, 0.0, 0.3, 10.0, 0.2)
     settings = pe.SolverSettings(max_events_per_interval=2)
     table = pe.Circle(0.15)
-    s, impacts, _, elapsed = advance1(s0, 0.0, 0.0, 10.0, PARAMS, table, ELASTIC, settings)
+    s, impacts, _, elapsed = advance_interval(s0, 0.0, 0.0, 10.0, PARAMS, table, ELASTIC, settings)
     assert elapsed == 10.0 and len(impacts) > 2
-    s, impacts, _, elapsed = advance1(s0, 0.0, 0.0, 10.0, PARAMS, table, ELASTIC, settings, stop_after=5)
+    s, impacts, _, elapsed = advance_interval(s0, 0.0, 0.0, 10.0, PARAMS, table, ELASTIC, settings, stop_after=5)
     assert elapsed < 10.0 and len(impacts) == 2  # the cap comes first; the caller resumes

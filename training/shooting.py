@@ -21,7 +21,7 @@ import numpy as np
 
 import penny_env as pe
 from penny_env.physics.kernels import SCALAR, end_point
-from penny_env.physics.scalar import flow1
+from penny_env.physics.scalar import flow_penny
 from penny_env.physics.sensitivity import flow_jacobians
 
 SEGMENT_ROWS = 10   # control rows per shooting segment
@@ -82,7 +82,7 @@ def rollout(prob, v, start=None):
         As = Phi @ A  # (n, 6, 6)
         G = np.empty((len(taus), 2, 6))
         for j, tau in enumerate(taus):
-            st = flow1(s, a1, a2, tau, R)
+            st = flow_penny(s, a1, a2, tau, R)
             for e, sigma in enumerate((1.0, -1.0)):
                 h, G[j, e] = wall_gradient(prob, st, sigma)
                 hs.append(h)

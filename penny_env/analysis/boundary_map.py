@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import batch
 from ..physics import PennyParams, make_law, make_table
-from ..physics.scalar import flow1
+from ..physics.scalar import flow_penny
 from ..physics.sensitivity import GRAZING_SPEED, flow_jacobian, impact_linearisation, vector_field
 
 REDUCED = [0, 1, 3, 4, 5]  # x, y, phi, theta_dot, phi_dot: theta never enters the dynamics
@@ -304,7 +304,7 @@ def tangent_maps(orb: Orbits, i: int) -> TangentMaps:
     for k in range(K):
         x0 = orb.post[k, i]
         Phi, _ = flow_jacobian(x0, 0.0, 0.0, tau[k], R)
-        pre = np.array(flow1(tuple(x0), 0.0, 0.0, tau[k], R))
+        pre = np.array(flow_penny(tuple(x0), 0.0, 0.0, tau[k], R))
         sigma = float(orb.ends[k + 1, i])
         post, D, grad_g = impact_linearisation(pre, sigma, params, tab, law)
         f_minus = vector_field(pre, 0.0, 0.0, R)

@@ -305,10 +305,10 @@ def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample
                   control_dt=None, env_dt=0.05, settings: SolverSettings | None = None,
                   wall_budget=None, scalar: bool = False) -> HybridResult:
     """The environment's step path: penny_env.physics.advance_pennies on a batch of one over intervals of env_dt
-    (scalar=True: penny_env.physics.scalar.advance1, the plain-float event loop of the single env's fast
+    (scalar=True: penny_env.physics.scalar.advance_interval, the plain-float event loop of the single env's fast
     path, bitwise equal to advance_pennies)."""
     if scalar:
-        from ..physics.scalar import advance1
+        from ..physics.scalar import advance_interval
     _check_stop(n_impacts, t_stop, t_sample)
     settings = SolverSettings() if settings is None else settings
     law = make_law(law)
@@ -334,7 +334,7 @@ def run_step_path(state, *, params, table, law, n_impacts=None, t_stop, t_sample
         t_next = min(t_env, t_b)
         a1, a2 = _accels(t, controls, control_dt, params)
         if scalar:
-            st, impacts, _, _ = advance1(tuple(float(v) for v in S[:, 0]), a1, a2, t_next - t, params, table, law,
+            st, impacts, _, _ = advance_interval(tuple(float(v) for v in S[:, 0]), a1, a2, t_next - t, params, table, law,
                                          settings)
             S = np.array(st, dtype=float)[:, None]
             for ti, end, post in impacts:

@@ -157,7 +157,7 @@ def wall_excursions(sc: Scene, window: float = 1e-2) -> np.ndarray:
     whose excursion is below SolverSettings().contact_tol x table size cannot be resolved in
     float64 (the whole grazing event is inside the round-off of h). nan for controlled scenes."""
     from ..physics.params import SolverSettings
-    from ..physics.scalar import flow1, scalar_model, wall1
+    from ..physics.scalar import flow_penny, scalar_model, end_wall_gap
     out = np.full(sc.n_impacts, np.nan)
     if sc.controls is not None:
         return out
@@ -171,7 +171,7 @@ def wall_excursions(sc: Scene, window: float = 1e-2) -> np.ndarray:
         lo, hi = max(tc - window, 0.0), tc + window
 
         def g(t):
-            v, d = wall1(flow1(s, 0.0, 0.0, t, P.R), sig, model)
+            v, d = end_wall_gap(flow_penny(s, 0.0, 0.0, t, P.R), sig, model)
             return float(v), float(d)
         if g(hi)[1] > 0:  # still rising at the window's end: a transversal impact, not grazing
             out[i] = np.inf

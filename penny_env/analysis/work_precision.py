@@ -46,7 +46,7 @@ def methods(quick: bool):
     out.append(("env step path (advance, 0.05 s)", "default", run_step_path, {"env_dt": 0.05}))
     try:
         from ..physics import scalar  # noqa: F401
-        out.append(("env step path (scalar advance1, 0.05 s)", "default", run_step_path,
+        out.append(("env step path (scalar advance_interval, 0.05 s)", "default", run_step_path,
                     {"env_dt": 0.05, "scalar": True}))
     except ImportError:  # pragma: no cover - older physics without the plain-float path
         pass

@@ -13,7 +13,7 @@ IMPACT_CAPACITY = 8
 
 
 class CompiledBatch:
-    """The per-penny event loop over one interval for (6, N) batches, on one target (physics/builder.py):
+    """The per-penny event loop over one interval for (6, N) batches, on one target (backends/builder.py):
     "cpu" (numba, parallel over pennies, the default), "cuda" (one GPU thread per penny) or "python" (the
     plain functions: the readable reference). :meth:`states_and_impacts`, :meth:`run_intervals`,
     :meth:`first_impacts`.

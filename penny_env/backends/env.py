@@ -127,7 +127,7 @@ def observe_rows_device(rows, st, consts, obs):
 # -- the GPU's vector step in two kernels: the common, impact-free step, and the rest ---------------------------------
 # A kernel's registers are those of its heaviest path: with the event loop and the reset's draws in it, the step
 # kernel needs about 250 per thread (an eighth of an H100's threads resident). The fast kernel runs what most
-# envs do at most steps, a period the certificate shows free of impacts (scalar.certified_free_trig: then
+# envs do at most steps, a period the certificate shows free of impacts (scalar.period_is_free: then
 # run_interval is one flow), with the same functions in the same order as step_env; the envs it cannot finish
 # (an impact search, a NEXT_STEP reset, a non-finite action; SAME_STEP's reset after a finished step) go on a
 # list that the rare kernel, one thread per listed env, finishes with step_env itself (or same_step_reset).
@@ -158,8 +158,8 @@ def fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot):
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
         if math.isfinite(a0) and math.isfinite(a1):
             acc1, acc2, ctrl = actuate(a0, a1, p)
-            if p.plane or certified_free_trig(st_i.s, st_i.trig[2], st_i.trig[3], acc1, acc2, p.dt, m):  # noqa: F821
-                s1 = flow1(st_i.s, acc1, acc2, p.dt, m.R)  # noqa: F821
+            if p.plane or period_is_free(st_i.s, st_i.trig[2], st_i.trig[3], acc1, acc2, p.dt, m):  # noqa: F821
+                s1 = flow_penny(st_i.s, acc1, acc2, p.dt, m.R)  # noqa: F821
                 new, r, te, tu, e, lim = conclude(st_i, s1, p.dt, limit_of(s1, p.dt, FAULT_NONE, p), ctrl, 0, p, k,
                                                   obs, i)
                 write_state(st, i, new)

@@ -119,12 +119,12 @@ def _table_wall_distance(m, c, s):
 def plane_advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
     """scalar.advance_into in the open plane's builds: one flow, the whole motion where there is no wall (and
     run_interval never calls it there). It keeps the event loop out of the plane's machine code."""
-    return flow1(s, acc1, acc2, dt, m.R), dt  # noqa: F821  (in the build's namespace)
+    return flow_penny(s, acc1, acc2, dt, m.R), dt  # noqa: F821  (in the build's namespace)
 
 
 def plane_advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc):
     """scalar.advance_through_into in the open plane's builds (see :func:`plane_advance_into`)."""
-    return flow1(s, acc1, acc2, dt, m.R), dt  # noqa: F821
+    return flow_penny(s, acc1, acc2, dt, m.R), dt  # noqa: F821
 
 
 def law_dispatch_source(indices) -> str:

@@ -49,7 +49,7 @@ def _cis_kind(limit):
 RULES = tuple((limit, tuple((0.5 * x).tolist()), tuple((0.5 * wt).tolist()), _cis_kind(limit))
               for limit, (x, wt) in ((limit, np.polynomial.legendre.leggauss(n)) for limit, n in RULE_SIZES))
 # The same rules as equal-length tuples (zero-padded) with their node counts: the form the scalar
-# loop (scalar.displacement1) indexes, in plain Python and compiled alike.
+# loop (scalar.displacement_penny) indexes, in plain Python and compiled alike.
 RULE_LIMITS = tuple(r[0] for r in RULES)
 RULE_COUNTS = tuple(len(r[1]) for r in RULES)
 RULE_CIS = tuple(r[3] for r in RULES)
@@ -72,7 +72,7 @@ def displacement_quadrature(W, w, ph, acc1, acc2, t, R):
     """Contact-point displacement over [0, t] with steering torque, (N,) arrays.
 
     Sums run in a fixed order (nodes in sequence, then panels in sequence), the order of
-    scalar.displacement1, so a penny's result is bitwise the same alone or in any batch."""
+    scalar.displacement_penny, so a penny's result is bitwise the same alone or in any batch."""
     n = W.shape[0]
     k = panel_counts(w, acc1, t)
     per_panel = phase_sweep(w, acc1, t) / k

@@ -19,7 +19,7 @@ def math_namespace(name, scalar, **functions):
 
     ``scalar`` tells a kernel whether it runs on one penny (plain floats: take the branch, skip
     the other) or on arrays (evaluate both branches, select with ``xp.where``). A module, not a
-    class instance, so numba can compile the kernels with such a namespace (physics/compiled.py)."""
+    class instance, so numba can compile the kernels with such a namespace (backends/physics.py)."""
     ns = types.ModuleType(name)
     ns.scalar = scalar
     for key, value in functions.items():

@@ -1,7 +1,7 @@
 """What :func:`~penny_env.physics.laws.register_law` tries before it accepts a law.
 
 A law is a plain function ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)`` that the event loop
-calls at every impact, compiled by numba (physics/compiled.py). A law that cannot run there, or that
+calls at every impact, compiled by numba (backends/physics.py). A law that cannot run there, or that
 runs and returns nonsense, used to surface far from its cause: a numba TypingError while an unrelated
 env compiled, NaN observations, or speeds of 1e14 rad/s past MAX_ANGULAR_SPEED. So registration tries
 it first, with a message naming the law:

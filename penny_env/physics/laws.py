@@ -150,7 +150,7 @@ def law_index(update) -> int:
 
 def builtin_law_indices() -> tuple:
     """Indices in COMPILED_LAWS of penny_env's own laws: every compiled build holds them (and, besides them, only
-    the one user law its Model runs: physics/compiled.py's variant_key), so that a user's law never enters
+    the one user law its Model runs: backends/physics.py's variant_key), so that a user's law never enters
     the code of an environment that does not use it."""
     return tuple(k for k, f in enumerate(COMPILED_LAWS) if is_builtin_law(f))
 

@@ -58,7 +58,7 @@ def advance_pennies(S, acc1, acc2, dt, params, table, law, settings, stop_after=
     Returns (new_states, log, elapsed): elapsed equals dt except for pennies stopped early by
     stop_after (a per-call impact count at which a penny stops right after its impact). backend
     "python" runs the plain-Python loop penny by penny; "numba" or "auto" the compiled batch (the same
-    functions, physics/builder.py)."""
+    functions, backends/builder.py)."""
     from ..backends.batch import CompiledBatch, flat_log
     from ..backends.choice import choose_backend
     S, n, acc1, acc2, dts = _columns(S, acc1, acc2, dt)

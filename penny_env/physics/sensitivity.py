@@ -242,7 +242,7 @@ def trajectory_jacobians(traj, table, law, controls=None, n_impacts=None, t_fina
     traj: a Trajectory from simulate() (its segments and impacts); table, law: the physics objects it
     ran with; controls (K, 2), n_impacts and t_final as simulate() used them (t_final None: the run
     stops at its n_impacts-th impact). The control rows' times come from the trajectory's segments."""
-    from .scalar import flow1
+    from .scalar import flow_penny
 
     params = traj.params if params is None else params
     R = params.R
@@ -289,7 +289,7 @@ def trajectory_jacobians(traj, table, law, controls=None, n_impacts=None, t_fina
         if (j < traj.n_impacts and traj._seg_t[i + 1] == traj.impact_times[j]
                 and np.array_equal(traj._seg_s[i + 1], traj.impact_states[j])):
             sigma = float(traj.impact_ends[j])
-            pre = np.array(flow1(tuple(s0), acc1, acc2, tau, R))
+            pre = np.array(flow_penny(tuple(s0), acc1, acc2, tau, R))
             post, D, grad_g = impact_linearisation(pre, sigma, params, table, law)
             f_minus = vector_field(pre, acc1, acc2, R)
             f_plus = vector_field(traj._seg_s[i + 1], acc1, acc2, R)

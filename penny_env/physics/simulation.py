@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .scalar import NO_ARC, flow1, impact_buffers, impacts_of, overflowed, relocate1, run_interval, scalar_model
+from .scalar import NO_ARC, flow_penny, impact_buffers, impacts_of, overflowed, relocate_inside, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
 from .faults import check_mapped, fault_error
 from .laws import apply_law, make_law
@@ -141,7 +141,7 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
     check_inside(S, params, table)
     state = tuple(float(v) for v in S[:, 0])
     if table is not None:
-        state = relocate1(state, scalar_model(params, table, law, settings))
+        state = relocate_inside(state, scalar_model(params, table, law, settings))
 
     # the intervals: the control intervals; without controls, batch.simulate's grid of FREE_INTERVAL
     # for runs to t_final alone that it would accept (so that both give bitwise the same), else one
@@ -229,7 +229,7 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
                 complete = False  # n_impacts cannot be reached
                 t = t0
             else:  # one flow to t_final (batch.simulate would take the remaining FREE_INTERVAL steps)
-                state = flow1(state, 0.0, 0.0, t_final - t0, params.R)
+                state = flow_penny(state, 0.0, 0.0, t_final - t0, params.R)
                 t = t_final
             break
         if u is not None:  # the next control interval starts a new segment
