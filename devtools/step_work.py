@@ -24,38 +24,48 @@ PRESETS = ("PennyPark-Stadium-v0", "PennyImpacts-Stadium-v0", "PennyPark-Circle-
            "PennyReach-Ellipse-v0")
 
 
+COUNTED = {"end_search_step": "ends", "first_impact_search": "searches", "advance_into": "loops",
+           "end_search_step_curved": "curv"}
+
+
 def counters(n, steps):
+    """The plain-Python step's calls of the event loop's functions, counted in the python build's namespace (the
+    copies there call each other by name: backends/builder.py)."""
     cnt = {}
+    for env_id in PRESETS:
+        cnt.clear()
+        venv = gym.make_vec(env_id, num_envs=n, backend="python").unwrapped
+        step_ns = venv._fns.step_envs.__globals__
+        missing = [name for name in COUNTED if name not in step_ns]
+        if missing:
+            raise RuntimeError(f"the python build's namespace lacks {missing}: the counters would read 0")
+        # the env's namespace and the physics build's (whose copies call each other there)
+        spaces = [step_ns] + [step_ns[name].__globals__ for name in COUNTED]
+        spaces = [ns for k, ns in enumerate(spaces) if all(ns is not other for other in spaces[:k])]
+        saved = [(ns, name, ns[name]) for ns in spaces for name in COUNTED if name in ns]
 
-    def wrap(mod, name, key):
-        f = getattr(mod, name)
-
-        def counted(*a, **k):
-            cnt[key] = cnt.get(key, 0) + 1
-            return f(*a, **k)
-        setattr(mod, name, counted)
-        return f
-
-    saved = [(scalar, "end_search_step", wrap(scalar, "end_search_step", "ends")),
-             (scalar, "first_impact_search", wrap(scalar, "first_impact_search", "searches")),
-             (scalar, "advance_into", wrap(scalar, "advance_into", "loops")),
-             (scalar, "end_search_step_curved", wrap(scalar, "end_search_step_curved", "curv"))]
-    try:
-        for env_id in PRESETS:
-            cnt.clear()
-            venv = gym.make_vec(env_id, num_envs=n, backend="python").unwrapped
+        def counted(f, key):
+            def call(*a, **k):
+                cnt[key] = cnt.get(key, 0) + 1
+                return f(*a, **k)
+            return call
+        try:
+            for ns, name, f in saved:
+                ns[name] = counted(f, COUNTED[name])
             venv.reset(seed=0)
             venv.action_space.seed(0)
             imp = 0
             for _ in range(steps):
                 imp += int(venv.step(venv.action_space.sample())[4]["impacts"].sum())
-            k = n * steps
-            print(f"{env_id:26s} per env-step: event-loop calls {cnt.get('loops', 0) / k:.3f}, searches "
-                  f"{cnt.get('searches', 0) / k:.3f}, search iterations {cnt.get('ends', 0) / 2 / k:.2f}, curvature steps "
-                  f"{cnt.get('curv', 0) / k:.2f}, impacts {imp / k:.3f}", flush=True)
-    finally:
-        for mod, name, f in saved:
-            setattr(mod, name, f)
+        finally:
+            for ns, name, f in saved:
+                ns[name] = f
+        if imp and not cnt.get("searches"):
+            raise RuntimeError(f"{env_id}: impacts without counted searches: the counters miss the build's calls")
+        k = n * steps
+        print(f"{env_id:26s} per env-step: event-loop calls {cnt.get('loops', 0) / k:.3f}, searches "
+              f"{cnt.get('searches', 0) / k:.3f}, search iterations {cnt.get('ends', 0) / 2 / k:.2f}, curvature steps "
+              f"{cnt.get('curv', 0) / k:.2f}, impacts {imp / k:.3f}", flush=True)
 
 
 def penny_costs(n, steps):

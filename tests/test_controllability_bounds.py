@@ -64,7 +64,7 @@ def test_t2_5_wall_distance_is_a_lower_bound(name):
 
 
 @pytest.mark.parametrize("env_id, overrides", [
-    (STEER, {}), (STEER, {"table": {"kind": "circle", "r": 0.5}, "law": 0.5}),
+    (STEER, {}), (STEER, {"table": {"kind": "circle", "radius": 0.5}, "law": 0.5}),
     ("PennyProbeDrive-Stadium-Elastic-v0", {}), ("PennyProbeBoth-Stadium-E05-v0", {"scene": "rounded_rectangle"}),
     ("PennyProbeSteer-Plane-v0", {}), (STEER, {"table": superellipse(), "max_episode_steps": 50}),
 ])
@@ -186,12 +186,12 @@ def test_t2_5_decides_the_circle_of_radius_half_and_some_pairs_of_a_smaller_one(
     targets lie >= 0.206 m from the wall, the theorem allows at most 0.202 m), and every pair the env draws is
     excluded pair by pair; on a circle of radius 0.35 m the cell is open and only some pairs are excluded; on the
     probes' own tables no pair is."""
-    scene, task = ct.resolve_id(STEER, table={"kind": "circle", "r": 0.5}, law=0.5)
+    scene, task = ct.resolve_id(STEER, table={"kind": "circle", "radius": 0.5}, law=0.5)
     cell = ct.cell_theorem(scene, task)
     assert cell is not None and cell.id == "T2.5" and set(cell.conditions) == {"speed", "time"}
     assert "= 0.202 m of the wall" in cell.reason and ">= 0.206 m from it" in cell.reason
-    for overrides, expect in (({"table": {"kind": "circle", "r": 0.5}, "law": 0.5}, "all"),
-                              ({"table": {"kind": "circle", "r": 0.35}, "law": 0.5}, "some"),
+    for overrides, expect in (({"table": {"kind": "circle", "radius": 0.5}, "law": 0.5}, "all"),
+                              ({"table": {"kind": "circle", "radius": 0.35}, "law": 0.5}, "some"),
                               ({}, "none"), ({"scene": "stadium"}, "none"), ({"scene": "rounded_rectangle"}, "none")):
         scene, task = ct.resolve_id(STEER, **overrides)
         env = gym.make(STEER, backend="python", **overrides)
@@ -210,11 +210,11 @@ def test_t2_5_needs_its_hypotheses():
     """T2.5 reads the speeds and the time limit: starts that may roll slower than speed_tolerance (they may creep
     to the target without an impact) or a longer episode leave the r = 0.5 cell undecided; a shorter one decides
     the r = 0.35 cell; a user ConvexTable is decided the same way."""
-    big = {"table": {"kind": "circle", "r": 0.5}, "law": 0.5}
+    big = {"table": {"kind": "circle", "radius": 0.5}, "law": 0.5}
     assert ct.theorem_for(STEER, **big, init={"theta_dot": [0.5, 5.0]}) is None
     assert ct.theorem_for(STEER, **big, max_episode_steps=800) is None
     assert ct.theorem_for(STEER, **big, speed_tolerance=0.02) is None
-    assert ct.theorem_for(STEER, table={"kind": "circle", "r": 0.35}, law=0.5, max_episode_steps=200).id == "T2.5"
+    assert ct.theorem_for(STEER, table={"kind": "circle", "radius": 0.35}, law=0.5, max_episode_steps=200).id == "T2.5"
     assert ct.theorem_for(STEER, table=superellipse(0.45), max_episode_steps=300).id == "T2.5"
     assert ct.theorem_for(STEER, table=superellipse(0.2)) is None
 
@@ -223,9 +223,9 @@ def test_t3_4_decides_a_circle_whose_starts_are_its_centre():
     """T3.4 on a circle: from its centre every heading line is a diameter, invariant for a drive-only penny that
     does not spin; a cell whose starts are all the centre (spawn_fraction 0) is impossible, and the simulator keeps
     the contact point on the diameter under random rolling torques for 10 s."""
-    over = {"table": {"kind": "circle", "r": 0.15}, "init": {"spawn_fraction": 0.0, "theta_dot": 0.0, "phi_dot": 0.0}}
+    over = {"table": {"kind": "circle", "radius": 0.15}, "init": {"spawn_fraction": 0.0, "theta_dot": 0.0, "phi_dot": 0.0}}
     assert ct.theorem_for("PennyProbeDrive-Ellipse-Elastic-v0", **over).id == "T3.4"
-    assert ct.theorem_for("PennyProbeDrive-Ellipse-Elastic-v0", table={"kind": "circle", "r": 0.15}) is None
+    assert ct.theorem_for("PennyProbeDrive-Ellipse-Elastic-v0", table={"kind": "circle", "radius": 0.15}) is None
     env = gym.make("PennyProbeDrive-Ellipse-Elastic-v0", backend="python", **over)
     rng = np.random.default_rng(5)
     scene, task = ct.resolve_id("PennyProbeDrive-Ellipse-Elastic-v0", **over)

@@ -160,7 +160,8 @@ def _simulator(script, *args, timeout=900):
 def test_cuda_backend_equals_cpu_under_the_simulator():
     rows = _simulator("cuda_sim_check.py", "60")
     assert len(rows) == 12
-    walled = [row for row in rows if "plane" not in row["case"]]
+    # Short episodes (12 steps) rarely reach a wall; the long rollouts on walled tables must all bounce.
+    walled = [row for row in rows if "plane" not in row["case"] and row.get("episode_steps") is None]
     assert all(row["bitwise"] for row in rows)
     assert sum(row["impacts"] for row in walled) > 150 and all(row["impacts"] > 0 for row in walled)
     modes = {row["case"].split()[4] for row in rows if row["case"].startswith("vector")}

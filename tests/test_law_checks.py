@@ -208,14 +208,15 @@ def test_a_broken_law_never_enters_the_builds_of_other_envs():
 
 
 def test_builds_hold_the_built_in_laws_and_their_own(registry):
-    from penny_env.physics import compiled
+    from penny_env.backends import physics as compiled
     registry("own", restitution_like(1.5))
     j = laws.law_index(laws.LAW_KINDS["own"].update)
     builtin = laws.builtin_law_indices()
     assert builtin == (0, 1) and compiled.build_laws(-1) == builtin == compiled.build_laws(0)
     assert compiled.build_laws(j) == builtin + (j,)
     assert compiled.variant_key(0) == compiled.variant_key(0, 1) != compiled.variant_key(0, j)
-    assert compiled.cacheable(0) and not compiled.cacheable(0, j)
+    from penny_env.backends.cache import cacheable
+    assert cacheable(compiled.formulas(0)) and not cacheable(compiled.formulas(0, j))
     src = compiled.law_dispatch_source(compiled.build_laws(j))
     assert f"m.law == {j}" in src and "return math.nan" in src  # another law's Model gets NaN: the guard names it
 

@@ -170,8 +170,8 @@ FORK_WHILE_STEPPING = """
     import numpy as np
     import numba
     import penny_env
-    from penny_env.physics import parallel
-    from penny_env.physics.parallel import SERIAL_BELOW
+    from penny_env.backends import threads
+    from penny_env.backends.threads import SERIAL_BELOW
     N = 2 * SERIAL_BELOW  # the parallel loop
     v = penny_env.PennyVectorEnv(N)
     v.reset(seed=0)
@@ -188,7 +188,7 @@ FORK_WHILE_STEPPING = """
                     w = penny_env.PennyVectorEnv(n)
                     w.reset(seed=1)
                     w.step(np.zeros((n, 2)))
-                os._exit(0 if parallel.serial_now() else 3)
+                os._exit(0 if threads.serial_now() else 3)
             except BaseException:
                 os._exit(2)
         deadline = time.time() + 60

@@ -121,8 +121,8 @@ def test_readme_snippets_and_checkers(main_install, tmp_path):
 
 def test_every_other_readme_command_starts(main_install):
     run, _ = main_install
-    modules = sorted(set(re.findall(r"python -m ((?:penny_env|training|rl_zoo3)[\w.]*|pytest|build)\b", README)))
-    assert "training.train" in modules and "penny_env.analysis.throughput" in modules
+    modules = sorted(set(re.findall(r"python -m ((?:penny_env|training|devtools|rl_zoo3)[\w.]*|pytest|build)\b", README)))
+    assert "training.train" in modules and "devtools.throughput" in modules
     failed = []
     for module in modules:
         if module in OTHER_EXTRA:

@@ -151,7 +151,7 @@ def test_instances_without_fields_are_told_apart_by_their_constants(shapes):
     assert a != b and a == Disc(0.1) and hash(a) == hash(Disc(0.1))
     P, L, S = PennyParams(), make_law("elastic"), SolverSettings()
     assert scalar_model(P, a, L, S) != scalar_model(P, b, L, S)
-    assert scalar_model(P, b, L, S).t0 == pytest.approx(0.04)
+    assert scalar_model(P, b, L, S).table_c0 == pytest.approx(0.04)
     far = pe.simulate([0.15, 0, 0, 0.0, 10.0, 0.0], table=b, t_final=0.01)  # inside b, outside a
     assert far.n_impacts == 0
 

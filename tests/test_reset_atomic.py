@@ -20,9 +20,16 @@ def _snapshot_single(env):
             env.np_random.bit_generator.state)
 
 
-STAGES_SINGLE = [("sample", lambda env: (env._core, "sample")),
-                 ("initial_observation", lambda env: (env._fns, "initial_observation")),
+STAGES_SINGLE = [("initial_state", lambda env: (env._fns, "initial_state")),
+                 ("observe_state", lambda env: (env._fns, "observe_state")),
                  ("info", lambda env: (env, "_info"))]
+
+
+def _interrupt_entry(monkeypatch, env, name):
+    """env's entry point ``name`` (backends/env.EnvEntryPoints, a record) replaced by one that raises KeyboardInterrupt."""
+    def boom(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(env, "_fns", env._fns._replace(**{name: boom}))
 
 
 @pytest.mark.parametrize("stage", [s for s, _ in STAGES_SINGLE])
@@ -33,13 +40,14 @@ def test_an_interrupted_single_reset_makes_the_next_step_raise(monkeypatch, stag
     for _ in range(3):
         env.step(np.array([0.3, 0.8], np.float32))
     obj, name = dict(STAGES_SINGLE)[stage](env)
+    options = {"target": [0.01, 0.02]} if stage == "observe_state" else None  # (the options' stage)
     with monkeypatch.context() as m:
-        if isinstance(obj, dict):
-            m.setitem(obj, name, lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt()))
+        if obj is env._fns:
+            _interrupt_entry(m, env, name)
         else:
             _interrupt(m, obj, name)
         with pytest.raises(KeyboardInterrupt):
-            env.reset(seed=7 if seeded else None)
+            env.reset(seed=7 if seeded else None, options=options)
     with pytest.raises(ResetNeeded, match=r"previous step\(\) or reset\(\) was interrupted"):
         env.step(np.zeros(2, np.float32))
     # a reset then starts the episode as a fresh env does (the seed stream did not move)
@@ -58,7 +66,7 @@ def test_an_unseeded_reset_after_an_interrupted_one_draws_the_next_episode(monke
     env.reset(seed=11)
     ref.reset(seed=11)
     with monkeypatch.context() as m:
-        m.setitem(env._fns, "initial_observation", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt()))
+        _interrupt_entry(m, env, "initial_state")
         with pytest.raises(KeyboardInterrupt):
             env.reset()
     assert np.array_equal(env.reset()[0], ref.reset()[0])
@@ -77,7 +85,7 @@ def test_a_refused_reset_changes_nothing():
     env.step(np.array([0.2, 0.2], np.float32))  # (the episode goes on)
 
 
-@pytest.mark.parametrize("stage", ["sample", "observe_rows", "reset_envs", "info"])
+@pytest.mark.parametrize("stage", ["reset_rows", "observe_rows", "info"])
 @pytest.mark.parametrize("masked", [False, True])
 def test_an_interrupted_vector_reset_makes_the_next_step_raise(monkeypatch, stage, masked):
     n = 4
@@ -86,15 +94,13 @@ def test_an_interrupted_vector_reset_makes_the_next_step_raise(monkeypatch, stag
     for _ in range(2):
         env.step(np.full((n, 2), 0.4))
     options = {"reset_mask": np.array([True, False, True, False])} if masked else None
+    if stage == "observe_rows" and not masked:  # (observe_rows runs for reset options, and the rows outside a mask)
+        options = {"target": [0.01, 0.02]}
     with monkeypatch.context() as m:
-        if stage == "sample":
-            _interrupt(m, env._core, "sample")
-        elif stage == "observe_rows":
-            m.setitem(env._fns, "observe_rows", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt()))
-        elif stage == "info":
+        if stage == "info":
             _interrupt(m, env, "_info")
         else:
-            _interrupt(m, env, "_reset_envs")
+            _interrupt_entry(m, env, stage)
         with pytest.raises(KeyboardInterrupt):
             env.reset(seed=9, options=options)
     with pytest.raises(ResetNeeded, match=r"previous step\(\) or reset\(\) was interrupted"):
@@ -113,26 +119,26 @@ def test_a_refused_vector_reset_changes_nothing():
     env = PennyVectorEnv(n, "ellipse", "reach", backend="python")
     env.reset(seed=1)
     env.step(np.full((n, 2), 0.4))
-    before = (env.states.tolist(), env.targets.tolist(), env._episodes.tolist(), env._keys.tolist(),
+    before = (env.states.tolist(), env.targets.tolist(), env._st.episode.tolist(), env._st.key.tolist(),
               env.np_random.bit_generator.state)
     for kwargs in ({"seed": [1, 2]}, {"options": {"state": np.full(6, 9.0)}},
                    {"options": {"reset_mask": np.array([1, 0, 1])}}, {"seed": 2, "options": {"bad": 0}}):
         with pytest.raises((ValueError, TypeError)):
             env.reset(**kwargs)
-        assert (env.states.tolist(), env.targets.tolist(), env._episodes.tolist(), env._keys.tolist(),
+        assert (env.states.tolist(), env.targets.tolist(), env._st.episode.tolist(), env._st.key.tolist(),
                 env.np_random.bit_generator.state) == before
     env.step(np.full((n, 2), 0.4))
 
 
 def test_the_reset_flag_is_cleared_only_when_every_row_is_whole(monkeypatch):
-    # (the vector env's trig rows, which the step's impact certificate reads, are written by observe_rows)
+    # (the rows' state, trig and observation, which the step's impact certificate reads, are written by reset_rows)
     env = PennyVectorEnv(2, "circle", "reach", backend="python")
     calls = []
-    real = env._fns["observe_rows"]
+    real = env._fns.reset_rows
 
     def spy(*args):
         calls.append(env._in_step)
         return real(*args)
-    monkeypatch.setitem(env._fns, "observe_rows", spy)
+    monkeypatch.setattr(env, "_fns", env._fns._replace(reset_rows=spy))
     env.reset(seed=0)
     assert calls == [True] and env._in_step is False

@@ -87,7 +87,7 @@ def test_witness_command_on_a_cell_a_theorem_excludes(capsys):
 def test_witness_on_a_cell_a_theorem_excludes_in_part():
     """A circle of radius 0.35 m: T2.5 excludes the pair of seed 2 (its target is too far from the wall for the time
     left after the first impact) but not that of seed 0; both lines say which success condition was never met."""
-    w = wt.Witness("PennyProbeSteer-Stadium-Elastic-v0", {"table": {"kind": "circle", "r": 0.35}, "law": 0.5})
+    w = wt.Witness("PennyProbeSteer-Stadium-Elastic-v0", {"table": {"kind": "circle", "radius": 0.35}, "law": 0.5})
     try:
         r0, r2 = w.pair(0), w.pair(2)
     finally:

@@ -248,7 +248,7 @@ class Witness:
         obs, _ = vec.reset(options={"state": np.tile(state, (K, 1)), "target": np.tile(target, (K, 1))})
         ctrl = self.family(self.core, self.cands)
         impacts = np.zeros(K, np.int64)
-        tol, vtol = self.task.tolerance, self.task.speed_tolerance
+        tol, vtol = self.task.tolerance, rest_speed(self.task)
         diag = {"best_d": np.inf, "any_hit": False, "max_w_after_hit": 0.0, "slowest_within": np.inf,
                 "calmest": np.inf, "steps": 0}
         hits = np.zeros(K, np.int64)
@@ -288,7 +288,7 @@ class Witness:
     def why(self, diag, theorem=None) -> str:
         """Why no candidate succeeded: the success conditions never met by the searched episodes (position, speed,
         time) and, where a theorem covers the pair, the theorem with its numbers."""
-        tol, vtol = self.task.tolerance, self.task.speed_tolerance
+        tol, vtol = self.task.tolerance, rest_speed(self.task)
         T = self.max_steps * self.scene.control_dt
         parts = []
         if self.probe == "Drive" and diag.get("any_hit") and diag.get("max_w_after_hit", 1.0) < 1e-9:
@@ -299,7 +299,7 @@ class Witness:
         elif self.task.kind == "park" and diag.get("slowest_within", np.inf) >= vtol:
             parts.append(f"position met (closest approach {best:.4f} m < tolerance {tol:g} m) but speed never: within "
                          f"the tolerance |R theta_dot| >= {diag['slowest_within']:.4f} m/s >= speed_tolerance {vtol:g} m/s")
-        elif self.task.kind == "park" and self.task.spin_tolerance is not None:
+        elif getattr(self.task, "spin_tolerance", None) is not None:
             parts.append(f"position and rolling speed met but spin never: within the tolerance and under speed_tolerance "
                          f"|phi_dot| >= {diag.get('calmest', np.inf):.3g} rad/s >= spin_tolerance "
                          f"{self.task.spin_tolerance:g} rad/s")

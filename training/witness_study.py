@@ -35,7 +35,7 @@ TABLES = ("plane", "ellipse", "stadium", "circle", "rounded_rectangle")
 TABLE_NAMES = {"plane": "Plane", "ellipse": "Ellipse", "stadium": "Stadium", "circle": "Circle",
                "rounded_rectangle": "RoundedRectangle"}
 # tables no preset names (scene field overrides), run with the steer-only probe and e = 0.5 walls
-EXTRA_TABLES = {"circle_r0.5": {"kind": "circle", "r": 0.5}, "circle_r0.35": {"kind": "circle", "r": 0.35}}
+EXTRA_TABLES = {"circle_r0.5": {"kind": "circle", "radius": 0.5}, "circle_r0.35": {"kind": "circle", "radius": 0.35}}
 EXTRA_NAMES = {"circle_r0.5": "Circle r = 0.5 m", "circle_r0.35": "Circle r = 0.35 m"}
 EXTRA_CELLS = (("Steer", "circle_r0.5", "0.5"), ("Steer", "circle_r0.35", "0.5"))
 ALL_TABLES = TABLES + tuple(EXTRA_TABLES)

@@ -40,7 +40,7 @@ from . import periodic_orbits as po
 from . import point_billiard as pb
 
 ROOT = Path(__file__).resolve().parents[2]
-TABLES = {"circle": {"kind": "circle", "r": 0.2}, "ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2},
+TABLES = {"circle": {"kind": "circle", "radius": 0.2}, "ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2},
           "stadium": {"kind": "stadium", "radius": 0.1, "length": 0.15}}
 DISSIPATIVE = {"e = 0.9": 0.9, "e = 0.5": 0.5, "plastic": "plastic"}
 ROLLING_SPIN = 0.04   # rolling-dominated starts: |sin psi| <= this (billiards.py's)

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..envs.tasks.park import rest_speed
+
 DOC = "controllability_theory.md"
 POLYGON = 8192        # vertices of the inscribed polygon of the wall (wall_distance_lower)
 SLACK = 1e-5          # [table sizes] subtracted from every distance to the wall (the polygon's sagitta, round-off)
@@ -222,7 +224,7 @@ def cell_theorem(scene, task) -> TheoremVerdict | None:
         return None
     c = cell_numbers(scene, task)
     R, T = c.R, c.horizon
-    tol, vtol = task.tolerance, task.speed_tolerance
+    tol, vtol = task.tolerance, rest_speed(task)  # (reach: the rest speed its witnesses brake to)
     W_lo, W_hi = scene.init["theta_dot"]
     if scene.actuation == "steer" and task.kind == "park":
         v_min, v_max = R * _slowest(W_lo, W_hi), R * max(abs(W_lo), abs(W_hi))
@@ -274,7 +276,7 @@ def pair_theorem(scene, task, state, target) -> TheoremVerdict | None:
         return None
     c = cell_numbers(scene, task)
     R, T = c.R, c.horizon
-    tol, vtol = task.tolerance, task.speed_tolerance
+    tol, vtol = task.tolerance, rest_speed(task)  # (reach: the rest speed its witnesses brake to)
     v = abs(R * s[4])
     gap = float(np.hypot(*(g - s[:2])))
     if scene.actuation == "steer" and task.kind == "park":

@@ -87,7 +87,9 @@ class DeviceStep:
         else:
             self.launches = [(self.fns.step_envs.prepare(self.st, self.actions, self.consts, out, buf),)
                              for out, buf in self.sets]
-        self.views = [(StepResults(*map(self._view, out)), ImpactBuffers(*map(self._view, buf))) for out, buf in self.sets]
+        # the user-facing outputs (torch tensors on the buffers for outputs "torch"): the info's impact arrays only
+        self.views = [(StepResults(*map(self._view, out)), ImpactBuffers(*map(self._view, buf[:3]), *buf[3:]))
+                      for out, buf in self.sets]
         self._streams = {}
 
     # -- buffers -------------------------------------------------------------------------------------
@@ -115,9 +117,11 @@ class DeviceStep:
         n, K, d, alloc = self.n, self.K, self.obs_dim, self._alloc_output
         out = StepResults(alloc((n, d), np.float32), alloc(n), alloc(n, np.bool_), alloc(n, np.bool_), alloc(n),
                           alloc(n, np.int8), alloc(n), alloc(n), alloc(n, np.int64),
-                          alloc((n if self.same_step else 0, d), np.float32), alloc(n, np.bool_))
+                          alloc((n if self.same_step else 1, d), np.float32), alloc(n, np.bool_))
+        # (no post-impact states: empty slots, numba's own arrays; the scratch the info does not return, too)
         buf = ImpactBuffers(self._upload(np.full(n, K, dtype=np.int64), output=True), alloc((K, n)), alloc((K, n), np.int8),
-                            alloc((0, 6, n)), alloc((0, n), np.int8), alloc(n, np.int64), alloc(n, np.int8))
+                            self._alloc((0, 6, n)), self._alloc((0, n), np.int8), self._alloc(n, np.int64),
+                            self._alloc(n, np.int8))
         return out, buf
 
     def _view(self, a):
@@ -132,6 +136,8 @@ class DeviceStep:
         if self.torch is None:
             return 0
         handle = self.torch.cuda.current_stream(self.device).cuda_stream
+        if not handle:  # torch's default stream is CUDA's legacy default stream: numba's 0
+            return 0
         s = self._streams.get(handle)
         if s is None:
             s = self._streams[handle] = self.cuda.external_stream(handle)

@@ -42,24 +42,27 @@ def available_memory() -> int | None:
 def vector_env_bytes(obs_dim: int, K: int) -> int:
     """Bytes per env a PennyVectorEnv holds at its peak (K: max_impacts_in_info), from its arrays:
 
-    * state (vector_env.reset): S (6) and trig (4), target, arc (2 each), dist, time float64; steps, count
-      int64; seed keys and episodes uint64; two bool masks;
-    * the step's reused buffers (_scratch): post-impact states (K, 6) float64, rest flags (K) int8, arc
-      count int64, fault int8;
-    * one step's new arrays, kept by the caller: obs (obs_dim) float32; reward, kinetic energy float64;
-      terminated, truncated, limit 1 byte; impact counts int64, times (K) float64, ends (K) int8; the checked
-      actions (2) float64; the info's copies (time, distance, arc count: float64/int64) and its 10 bool masks;
-    * the reset's draws (core.sample): 8 uniforms per env in float64 with their uint64 hashes and two
-      temporaries, the drawn S, target, arc, and about ten float64 temporaries of the spawn formulas;
+    * spaces: the batched observation and action Boxes' low and high (float32) and their two bool masks;
+    * state (functional.EnvState): S (6), trig (4), target, arc (2 each), time, dist float64; steps, count,
+      episode int64; key uint64; pending bool; the step's reused arc counts (int64) and guard faults (int8),
+      and the info's all-true mask;
+    * one step's new arrays, kept by the caller: obs (obs_dim) float32; reward, kinetic energy, time,
+      distance float64; terminated, truncated, done bool; limit int8; arc count and impact counts int64;
+      impact times (K) float64 and ends (K) int8; the info's ten bool masks; counted twice (the previous
+      step's outputs are still referenced while the next step allocates), with the actions (2 float64, the
+      caller's and the checked copy);
+    * the reset's arrays (not kept with two steps' outputs): obs, the info's impact slots, scalars and masks,
+      the keys and episodes and the seeds' Python ints;
 
-    counted twice for the step's arrays (the previous step's outputs are still referenced while the next
-    step allocates)."""
+    tests/test_limits.py checks it against tracemalloc."""
     f8, i8, u8, f4, b1 = 8, 8, 8, 4, 1
-    state = (6 + 4 + 2 + 2 + 1 + 1) * f8 + 2 * i8 + 2 * u8 + 2 * b1
-    scratch = K * 6 * f8 + K * b1 + i8 + b1
-    step = obs_dim * f4 + 2 * f8 + 3 * b1 + i8 + K * f8 + K * b1 + 2 * f8 + 3 * f8 + 10 * b1
-    reset = 8 * (f8 + 3 * u8) + (6 + 2 + 2) * f8 + 10 * f8 + obs_dim * f4 + K * (f8 + b1)
-    return state + scratch + max(2 * step, step + reset)
+    spaces = (obs_dim + 2) * (2 * f4 + 2 * b1)
+    state = (6 + 4 + 2 + 2 + 1 + 1) * f8 + 3 * i8 + u8 + b1 + (i8 + b1) + b1
+    impact_slots = K * (f8 + b1)
+    step = obs_dim * f4 + 4 * f8 + 3 * b1 + b1 + 2 * i8 + impact_slots + 10 * b1
+    actions = 2 * 2 * f8
+    reset = obs_dim * f4 + impact_slots + 116
+    return spaces + state + max(2 * step + actions, reset)
 
 
 def single_env_bytes(K: int) -> int:

@@ -322,11 +322,11 @@ class PennyVectorEnv(VectorEnv):
         if seed is None:
             episodes[mask] += 0 if first else 1
         else:
-            seeds = [int(seed) + i for i in range(n)] if int_seed else list(seed)
-            for i, s in enumerate(seeds):  # explicit seeding only, not the step path
-                if mask[i]:
-                    keys[i] = seed_keys([self.np_random.integers(0, 2**63) if s is None else s])[0]
-                    episodes[i] = 0
+            # one vectorized hash for the seeds given; a None draws from np_random, in row order
+            given = seeds if int_seed else [self.np_random.integers(0, 2**63) if s is None and mask[i] else s
+                                            for i, s in enumerate(seed)]
+            keys[mask] = seed_keys([s for s, m in zip(given, mask) if m])
+            episodes[mask] = 0
         rows = np.flatnonzero(mask)
         K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
         if first:
@@ -376,6 +376,8 @@ class PennyVectorEnv(VectorEnv):
         n = self.num_envs
         c = self._core
         a = check_actions(actions, (n, c.n_act), "actions")  # the step clips, as PennyEnv does
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._warn_faults(self._limits)  # the guard faults of the episodes this step resets
         out, buf, times, ends = self._outputs(n)
         # from here to the end of the loop the step's bookkeeping must run whole (class docstring)
         self._in_step = True
@@ -391,10 +393,11 @@ class PennyVectorEnv(VectorEnv):
         return obs, rew, term, trunc, info
 
     def _warn_faults(self, limits):
-        """A warning for the episodes that the event loop's guard ended (physics/faults.py), one per kind: where
-        the host sees the ended envs anyway (SAME_STEP's step, DISABLED's reset), so that no reduction over the
-        envs is added to the step's hot path; info["limit"] names every one of them."""
-        if limits is None:
+        """A warning for the episodes that the event loop's guard ended (physics/faults.py), one per kind, as
+        those envs reset (NEXT_STEP: the next step; SAME_STEP: this step; DISABLED: the reset); info["limit"]
+        names every one of them. (The CUDA backend leaves it to info["limit"]: a warning would need the host to
+        read the limits each step.)"""
+        if limits is None or not limits.size or limits.max() < LIMIT_LAW_NONFINITE:  # (one pass: the usual case)
             return
         faults = limits[(limits >= LIMIT_LAW_NONFINITE) & (limits != LIMIT_ACTION)]
         for code in np.unique(faults):

@@ -157,7 +157,7 @@ def third_order(table):
 
 
 def table_constants(table):
-    """(kind, constants t0..t4) of a table: OTHER for a table without registered compiled formulas."""
+    """(kind, constants for table_c0..table_c4) of a table: OTHER for a table without registered compiled formulas."""
     kind = compiled_kind(type(table))
     if kind == OTHER:
         return OTHER, (0.0,) * N_CONSTANTS
