@@ -1,25 +1,40 @@
 #!/usr/bin/env bash
-# One lent GPU session, in one call of the device tool (devtools/README.md): install what the image lacks (the
-# wheels carried in .whl), the gpu tests, the throughput benchmark, a PPO run and the pure-RL scale study.
-# Every part runs even if one before it failed; logs and reports go to $OUT.
-#   part A (default): tests, throughput (with variants), PPO on PennyReach-Ellipse-v0
-#   part B: the scale study (training.scale_rl) with the arguments after "B"
+# One lent GPU session in one call of the device tool (docs/gpu.md, "Measuring on a lent GPU"): install what the
+# image lacks (the wheels carried in .whl: gymnasium and its farama-notifications), then, each part under its own
+# time limit and each run even where one before it failed:
+#   1. the gpu tests (tests/test_cuda.py -m gpu);
+#   2. tests/cuda_sim_check.py on the real GPU (the CUDA backend against the CPU, step by step; it stops at the
+#      first difference and says where);
+#   3. devtools.throughput_gpu --variants -> docs/throughput_gpu.md;
+#   4. training.ppo_torch with configs/train/ppo_torch_gpu.yaml -> docs/ppo_torch_gpu.md;
+#   5. training.scale_rl (the arguments after the script's name) -> docs/scale_rl.md (+ .csv, .png), rewritten
+#      after each run so that a time limit keeps the cells done.
+# The reports are written where they are committed, then copied with one log to $OUT (8 files at most come back).
+#   usage: bash devtools/gpu_session.sh [scale_rl arguments...]
 set -u
-export PYTHONUNBUFFERED=1 OUT=${OUT:-/tmp/out}
+export PYTHONUNBUFFERED=1 OUT=${OUT:-/tmp/out} TF_CPP_MIN_LOG_LEVEL=3
 mkdir -p "$OUT"
+LOG="$OUT/log.txt"
+t0=$(date +%s)
+stamp() { echo "=== $1 ($(( $(date +%s) - t0 )) s)" | tee -a "$LOG"; }
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
-  && export PYTHONPATH=/tmp/site:$PWD || { echo "wheel install failed"; exit 1; }
-export TF_CPP_MIN_LOG_LEVEL=3
-part=${1:-A}; shift || true
-nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm --format=csv | tee "$OUT/gpu.txt"
-python3 -c "import numba, numba_cuda, numpy, torch, gymnasium; print('numba', numba.__version__, 'numba-cuda', numba_cuda.__version__, 'numpy', numpy.__version__, 'torch', torch.__version__, 'gymnasium', gymnasium.__version__)" | tee -a "$OUT/gpu.txt"
-if [ "$part" = A ]; then
-  timeout 240 python3 -m pytest -q -p no:cacheprovider -m gpu tests/test_cuda.py 2>&1 | tail -30 | tee "$OUT/gpu_tests.txt"
-  timeout 300 python3 -m devtools.throughput_gpu --variants --out "$OUT/throughput_gpu.md" 2>&1 | tail -25
-  timeout 240 python3 -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda --device cuda \
-      --curve-points 5 --out /tmp/ppo 2>&1 | tail -8 | tee "$OUT/ppo.txt"
-  cp /tmp/ppo/results.json "$OUT/ppo_results.json" 2>/dev/null; cp /tmp/ppo/progress.csv "$OUT/ppo_progress.csv" 2>/dev/null
-else
-  timeout 560 python3 -m training.scale_rl --out "$OUT/scale_rl.md" "$@" 2>&1 | tail -20
-fi
-ls -la "$OUT"
+  && export PYTHONPATH=/tmp/site:$PWD || { echo "wheel install failed" | tee -a "$LOG"; exit 1; }
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1 | tee -a "$LOG"
+python3 -c "import numba, numba_cuda, numpy, torch, gymnasium; print('numba', numba.__version__, 'numba-cuda', numba_cuda.__version__, 'numpy', numpy.__version__, 'torch', torch.__version__, 'gymnasium', gymnasium.__version__)" 2>&1 | tee -a "$LOG"
+stamp "1. gpu tests"
+timeout 100 python3 -m pytest -q -p no:cacheprovider -m gpu tests/test_cuda.py -x 2>&1 | tail -25 >> "$LOG"
+stamp "2. CUDA against CPU, step by step"
+timeout 45 python3 tests/cuda_sim_check.py 30 >> "$LOG" 2>&1; echo "exit $?" >> "$LOG"
+stamp "3. throughput"
+timeout 150 python3 -m devtools.throughput_gpu --variants --out docs/throughput_gpu.md 2>&1 | tail -20 >> "$LOG"
+cp docs/throughput_gpu.md "$OUT/" 2>/dev/null
+stamp "4. PPO"
+timeout 90 python3 -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda --device cuda \
+    --curve-points 5 --report docs/ppo_torch_gpu.md --out /tmp/ppo 2>&1 | tail -6 >> "$LOG"
+cp docs/ppo_torch_gpu.md "$OUT/" 2>/dev/null
+stamp "5. scale_rl $*"
+timeout "${SCALE_SECONDS:-170}" python3 -m training.scale_rl --out docs/scale_rl.md "$@" 2>&1 | tail -12 >> "$LOG"
+cp docs/scale_rl.md docs/scale_rl.csv docs/scale_rl.png "$OUT/" 2>/dev/null
+stamp "done"
+ls -la "$OUT" >> "$LOG"
+cat "$LOG"

@@ -92,6 +92,7 @@ def rates(env_id, n, steps, **cuda_options) -> dict:
         dev.launch(parity[0])
         parity[0] ^= 1
     out["kernels alone"] = n * steps / timed(kernels, steps)
+    out["prepared"] = all(p.fast for pair in dev.launches for p in pair)  # (False: numba's dispatcher launched)
     graphed = CudaGraphStep(env)
     out["graph replay"] = n * steps / timed(lambda: graphed(acts[0]), steps)
     arrays = list(dev.st) + [dev.actions, dev.work, dev.reset_obs] + [a for s in dev.sets for part in s for a in part]
@@ -130,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--env-id", default=ENV_ID)
     ap.add_argument("--sizes", nargs="+", type=int, default=None, help=f"numbers of envs (default {SIZES})")
     ap.add_argument("--variants", action="store_true", help="also time the other ways to build the step's kernels")
+    ap.add_argument("--variant-sizes", nargs="+", type=int, default=[65536, 1_048_576],
+                    help="the N at which --variants times them (default 65536 1048576)")
     ap.add_argument("--no-cpu", action="store_true", help="skip the CPU backend's column")
     a = ap.parse_args(argv)
     sizes = a.sizes or ((256, 4096) if a.quick else SIZES)
@@ -151,8 +154,9 @@ def main(argv: list[str] | None = None) -> int:
         rows.append([f"{n:,}", f"{r['env.step']:,.0f}", f"{r['kernels alone']:,.0f}", f"{r['graph replay']:,.0f}",
                      f"{r['env.step'] / r['kernels alone']:.2f}", f"{c:,.0f}", f"{r['env.step'] / c:.1f}x",
                      f"{r['bytes per env']:.0f} B"])
-        print("  ".join(rows[-1]), flush=True)
-        if a.variants:
+        prepared = r["prepared"]
+        print("  ".join(rows[-1]) + f"  (prepared launches: {prepared})", flush=True)
+        if a.variants and (n in a.variant_sizes or a.quick):
             v = [f"{n:,}", f"{r['kernels alone']:,.0f}"]
             for opts in VARIANTS:
                 v.append(f"{kernel_rate(a.env_id, n, steps, **opts):,.0f}")
@@ -165,6 +169,7 @@ def main(argv: list[str] | None = None) -> int:
               "replay: the step captured in a CUDA graph (backends/cuda_env.CudaGraphStep).", "",
               *table(["N", "env.step", "kernels alone", "graph replay", "env.step / kernels", "CPU (numba, all cores)",
                       "env.step / CPU", "device memory per env"], rows), "",
+              f"Launches: {'prepared once (builder.PreparedLaunch)' if prepared else 'through numba dispatcher (the prepared path failed here)'}.", "",
               f"Best env.step: {best[0]:,.0f} env-steps/s at N = {best[1]:,} (targets: at least 1e9 at the best N, "
               "0.8 of the kernels alone at N >= 65,536, 1.2e7 at N = 4096)."]
     if var_rows:

@@ -47,6 +47,7 @@ import argparse
 import csv
 import dataclasses
 import json
+import sys
 import tempfile
 import time
 from collections import deque
@@ -456,7 +457,7 @@ def train(args: Args, env=None, log=print, on_update=None):
 
     results = {"env_id": args.env_id, "env_kwargs": args.env_kwargs, "timesteps": global_step,
                "train_seconds": train_seconds, "steps_per_s": global_step / train_seconds, "device": str(device),
-               "cuda_graph": bool(use_graph), "env_seconds": float("nan") if use_graph else timing["env"],
+               "cuda_graph": bool(use_graph), "env_on_device": bool(on_torch), "env_seconds": float("nan") if use_graph else timing["env"],
                "rollout_seconds": rollout_time, "update_seconds": update_time, "curve": curve,
                "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
     # a stand-in env passed by a caller (tests) has no registered id to evaluate on
@@ -513,6 +514,12 @@ def load_agent(run_dir, device="cpu") -> Agent:
 
 
 def parse_args(argv=None) -> Args:
+    """The run's Args from the command line (training.train's config files, flags, --set)."""
+    return parse_cli(argv)[0]
+
+
+def parse_cli(argv=None) -> tuple[Args, str | None]:
+    """(Args, the --report path or None)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = Args()
     ap.add_argument("--config", default=None, help="a training config (YAML, e.g. configs/train/ppo_reach_ellipse.yaml) "
@@ -532,6 +539,8 @@ def parse_args(argv=None) -> Args:
     ap.add_argument("--eval-episodes", type=int, default=None, help=f"final evaluation (default {d.eval_episodes})")
     ap.add_argument("--torch-threads", type=int, default=1, help="torch.set_num_threads (default 1)")
     ap.add_argument("--quick", action="store_true", help="a few thousand steps (< 60 s on a CPU): checks the pipeline")
+    ap.add_argument("--report", default=None, help="also write a markdown report of the run here (e.g. "
+                    "docs/ppo_torch_gpu.md: throughput, evaluation and the success curve, with the device's name)")
     ap.add_argument("--out", default=None, help="output folder (default runs/ppo_torch/<env_id>_<seed>; "
                                                 "--quick: a new temporary directory)")
     a = ap.parse_args(argv)
@@ -549,9 +558,11 @@ def parse_args(argv=None) -> Args:
         args = dataclasses.replace(args, device=a.device, env_backend=a.env_backend, torch_threads=a.torch_threads,
                                    quick=a.quick, out=a.out, **{k: v for k, v in changes.items() if v is not None})
         check_args(quick_args(args) if args.quick else args)
+        if a.report is not None and a.quick and Path(a.report).resolve().is_relative_to(ROOT / "docs"):
+            raise ValueError("--quick never writes into docs/: give --report a path outside it")
     except ValueError as exc:
         ap.error(str(exc))
-    return args
+    return args, a.report
 
 
 def parse_sets(items) -> dict:
@@ -566,9 +577,39 @@ def parse_sets(items) -> dict:
     return out
 
 
+def write_report(path, argv, results: dict) -> None:
+    """A markdown report of one run: the machine and device, throughput, the final evaluation and the curve."""
+    from penny_env.analysis.common import header, table, write
+    device = results["device"]
+    if device.startswith("cuda"):
+        import torch
+        device = f"{device} ({torch.cuda.get_device_name(0)})"
+    ev = results.get("eval") or {}
+    lines = header(f"training.ppo_torch on {results['env_id']}", "training.ppo_torch", argv)
+    lines += [f"- device: {device}; env state on the device: {results['env_on_device']}; rollouts replayed from a "
+              f"CUDA graph: {results['cuda_graph']}", "",
+              *table(["env steps", "training s", "env-steps/s (end to end)", "rollout s", "update s",
+                      "training success (last 100 episodes)", "evaluation success", "evaluation episodes",
+                      "evaluation mean return"],
+                     [[f"{results['timesteps']:,}", f"{results['train_seconds']:.1f}", f"{results['steps_per_s']:,.0f}",
+                       f"{results['rollout_seconds']:.1f}", f"{results['update_seconds']:.1f}",
+                       f"{results['train_success_rate']:.2f}", f"{ev.get('success_rate', float('nan')):.3f}",
+                       f"{ev.get('episodes', 0)}", f"{ev.get('mean_return', float('nan')):.2f}"]])]
+    if results["curve"]:
+        lines += ["", "Deterministic evaluations during training (not counted in the training time):", "",
+                  *table(["env steps", "training s", "success", "mean return"],
+                         [[f"{c['global_step']:,}", f"{c['wall_time_s']:.1f}", f"{c['success_rate']:.3f}",
+                           f"{c['mean_return']:.2f}"] for c in results["curve"]])]
+    write(str(path), lines)
+
+
 def main(argv=None):
-    args = parse_args(argv)
-    return train(args)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args, report = parse_cli(argv)
+    agent, results = train(args)
+    if report is not None:
+        write_report(report, argv, results)
+    return agent, results
 
 
 if __name__ == "__main__":

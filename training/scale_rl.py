@@ -69,14 +69,16 @@ def ppo_args(cell, seed: int, a, out: Path):
     from training.witness_study import cell_spec
     env_id, overrides = cell_spec(*cell)
     return Args(env_id=env_id, env_kwargs={**overrides, **reward_fields(env_id, overrides)}, num_envs=a.num_envs,
+                total_timesteps=a.steps,
                 seed=seed, device=a.device, env_backend=a.env_backend, num_steps=a.num_steps,
                 minibatch_size=a.minibatch_size, update_epochs=a.update_epochs, gamma=GAMMA, gae_lambda=0.98,
                 eval_episodes=a.eval_episodes, curve_points=a.curve_points, quick=False,
                 out=str(out / f"{env_id}_{'_'.join(cell)}_{seed}"))
 
 
-def run(a, log=print) -> list[dict]:
-    """Train every cell and seed; rows of CSV_COLUMNS (one per cell, seed and evaluation point)."""
+def run(a, log=print, after_each=None) -> list[dict]:
+    """Train every cell and seed; rows of CSV_COLUMNS (one per cell, seed and evaluation point). after_each(rows)
+    is called after each run (the report so far: a run cut short by a time limit keeps the cells done)."""
     from training.ppo_torch import check_args, train
     rows = []
     for text in a.cells:
@@ -95,6 +97,8 @@ def run(a, log=print) -> list[dict]:
                 rows.append({"probe": cell[0], "table": cell[1], "law": cell[2], "env_id": args.env_id, "seed": seed,
                              "global_step": point["global_step"], "train_seconds": round(point["wall_time_s"], 1),
                              "successes": k, "episodes": point["episodes"], "success_rate": point["success_rate"]})
+            if after_each is not None:
+                after_each(rows)
     return rows
 
 
@@ -131,9 +135,13 @@ def write_report(a, rows, seconds: float) -> Path:
     summary = summarise(rows)
     wit = witnessed_rates()
     fig = plot(summary, wit, out.with_suffix(".png"))
-    lines = [f"# Pure PPO at scale on the single-input probes", "",
-             f"`{a.command}` on {a.machine}, {datetime.date.today().isoformat()}: {len(a.cells)} cells x {a.seeds} seeds x "
-             f"{a.steps:,} env steps, {a.num_envs} envs x {a.num_steps} steps per rollout, minibatches of "
+    from penny_env.analysis.common import header
+    done = list(dict.fromkeys(" ".join(r["cell"]) for r in summary))
+    lines = header("Pure PPO at scale on the single-input probes", "training.scale_rl", a.argv)
+    lines += [f"- device: {a.machine}", "",
+             f"{len(done)} of {len(a.cells)} cells done" + ("" if len(done) == len(a.cells) else
+                                                          " (the others had not finished when this was written)") +
+             f"; {a.seeds} seeds x {a.steps:,} env steps, {a.num_envs} envs x {a.num_steps} steps per rollout, minibatches of "
              f"{a.minibatch_size}, {a.update_epochs} epochs; {seconds / 60:.1f} minutes in all. Reward: fair_pure_rl's "
              f"(the success bonus only: {REWARD}), gamma {GAMMA}, GAE lambda 0.98. Evaluation: the deterministic policy, "
              f"one episode on each of the witness study's pair seeds 0 .. {a.eval_episodes - 1}, at log-spaced sample "
@@ -199,8 +207,7 @@ def parse(argv=None):
     ap.add_argument("--verbose", action="store_true", help="ppo_torch's progress lines")
     ap.add_argument("--out", default=None, help="the report (default runs/scale_rl/scale_rl.md; --quick: a temp dir)")
     a = ap.parse_args(argv)
-    a.command = "python -m training.scale_rl " + " ".join(argv if argv is not None else __import__("sys").argv[1:])
-    a.machine = platform.node() or "this machine"
+    a.argv = list(argv if argv is not None else __import__("sys").argv[1:])
     if a.cells is None:
         a.cells = list(QUICK_CELLS if a.quick else DEFAULT_CELLS)
     for text in a.cells:
@@ -219,6 +226,11 @@ def parse(argv=None):
     import torch
     if a.env_backend is None and a.device in ("auto", "cuda") and torch.cuda.is_available():
         a.env_backend = "cuda"
+    on_gpu = a.device in ("auto", "cuda") and torch.cuda.is_available()
+    a.machine = (f"cuda ({torch.cuda.get_device_name(0)}), env backend {a.env_backend}" if on_gpu else
+                 f"cpu ({platform.processor() or platform.machine()}), env backend {a.env_backend or 'auto'}")
+    if a.quick and Path(a.out or "runs").resolve().is_relative_to(ROOT / "docs"):
+        ap.error("--quick never writes into docs/: give --out a path outside it")
     if a.out is None:
         base = Path(tempfile.mkdtemp(prefix="penny_env-scale-rl-quick-")) if a.quick else Path("runs") / "scale_rl"
         a.out = str(base / "scale_rl.md")
@@ -229,7 +241,7 @@ def parse(argv=None):
 def main(argv=None) -> int:
     a = parse(argv)
     t0 = time.perf_counter()
-    rows = run(a)
+    rows = run(a, after_each=lambda so_far: write_report(a, so_far, time.perf_counter() - t0))
     out = write_report(a, rows, time.perf_counter() - t0)
     print(f"[scale_rl] report: {out}")
     return 0

@@ -42,6 +42,8 @@ _ENV = ("penny_env/backends/builder.py", "penny_env/backends/env.py", "penny_env
         "penny_env/presets/scenes/stadium.yaml", "penny_env/presets/scenes/plane.yaml",
         "penny_env/presets/scenes/rounded_rectangle.yaml")
 
+_CUDA = ("penny_env/backends/cuda_env.py", "penny_env/backends/cuda_math.py", "penny_env/envs/vector_env.py")
+
 # report -> (the command that regenerates it, run from the repository root; its sources)
 REPORTS = {
     "docs/bench_solvers.md": ("python -m penny_env.analysis.bench_solvers --out docs/bench_solvers.md",
@@ -113,6 +115,17 @@ REPORTS = {
                           ("training/ppo_compare.py", "training/ppo_torch.py", "training/runner.py",
                            "training/episodes.py", "configs/train/ppo_reach_ellipse.yaml", "penny_env/sb3.py",
                            "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
+    # on a CUDA GPU (docs/gpu.md): the commands need one, so a change of these sources is stamped until one is lent
+    "docs/throughput_gpu.md": ("python -m devtools.throughput_gpu --variants --out docs/throughput_gpu.md",
+                               ("devtools/throughput_gpu.py", "devtools/throughput.py") + _CUDA + _ENV + _PHYSICS
+                               + _TABLES),
+    "docs/ppo_torch_gpu.md": ("python -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda "
+                              "--device cuda --curve-points 5 --report docs/ppo_torch_gpu.md",
+                              ("training/ppo_torch.py", "configs/train/ppo_torch_gpu.yaml") + _CUDA + _ENV + _PHYSICS
+                              + _TABLES),
+    "docs/scale_rl.md": ("python -m training.scale_rl --out docs/scale_rl.md",
+                         ("training/scale_rl.py", "training/ppo_torch.py", "training/fair_pure_rl.py",
+                          "training/witness_study.py", "training/study_report.py") + _CUDA + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
@@ -141,7 +154,10 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "training.fair_pure_rl": "docs/fair_pure_rl.md",
                   "devtools.contention": "docs/contention.md",
                   "devtools.compile_time": "docs/compile_time.md",
-                  "training.ppo_compare": "docs/ppo_torch.md"}
+                  "training.ppo_compare": "docs/ppo_torch.md",
+                  "devtools.throughput_gpu": "docs/throughput_gpu.md",
+                  "training.ppo_torch": "docs/ppo_torch_gpu.md",
+                  "training.scale_rl": "docs/scale_rl.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")

@@ -273,6 +273,7 @@ class PreparedLaunch:
         self.n = n
         self.blocks, self.threads = loop.config(max(n, 1))
         self.fast = False
+        self.launched = False
         try:
             self._marshal()
             self.fast = True
@@ -306,11 +307,18 @@ class PreparedLaunch:
         if self.n == 0:
             return
         if self.fast:
-            held = self._core_streams.get(id(stream))
-            if held is None:
-                held = self._core_streams[id(stream)] = (stream, self._to_core_stream(stream))
-            self._launch(held[1], self._config, self._cukernel, *self._kernelargs)
-        else:
+            try:
+                held = self._core_streams.get(id(stream))
+                if held is None:
+                    held = self._core_streams[id(stream)] = (stream, self._to_core_stream(stream))
+                self._launch(held[1], self._config, self._cukernel, *self._kernelargs)
+                self.launched = True
+                return
+            except Exception:  # noqa: BLE001 (the first launch proves the private path; later errors are real)
+                if self.launched:
+                    raise
+                self.fast = False
+        if not self.fast:
             self.loop.kernel[self.blocks, self.threads, stream](*self.args)
 
 
