@@ -52,11 +52,12 @@ def example_arguments(n: int = 4, K: int = 2, task="impacts"):
                             z(n, np.int8))
     buf = impact_buffers(n, K)
     rows = z(n, i)
-    work = (z(n, i), z(2, i), 0)
+    work = (z(n, i), z(1, i))
     return {
         "step_envs": (st, z((n, 2)), consts, out, env_buf),
         "fast_step_envs": (st, z((n, 2)), p, m, core.k, out, env_buf) + work,
         "rare_step_envs": (st, z((n, 2)), p, m, core.k, out, env_buf) + work,
+        "clear_work_count": (z(1, i),),
         "reset_rows": (rows, st, consts, out.obs),
         "observe_rows": (rows, st, consts, out.obs),
         "advance_batch": (z((6, n)), z(n), z(n), z(n), m, False, 0, z((6, n)), z((4, n)), z(n), buf),
@@ -83,6 +84,7 @@ def cuda_kernels(kind: int, task="impacts", fresh: bool = True, max_registers=No
     else:
         loops = (batch.advance_batch, batch.first_impact_batch, batch.laws)
     return {"step_envs": env.step_envs, "fast_step_envs": env.fast_step_envs, "rare_step_envs": env.rare_step_envs,
+            "clear_work_count": env.clear_work_count,
             "reset_rows": env.reset_rows, "observe_rows": env.observe_rows,
             "advance_batch": loops[0], "first_impact_batch": loops[1], "laws": loops[2]}
 

@@ -24,9 +24,9 @@ python3 -c "import numba, numba_cuda, numpy, torch, gymnasium; print('numba', nu
 stamp "1. gpu tests"
 timeout 100 python3 -m pytest -q -p no:cacheprovider -m gpu tests/test_cuda.py -x 2>&1 | tail -25 >> "$LOG"
 stamp "2. CUDA against CPU, step by step"
-timeout 45 python3 tests/cuda_sim_check.py 30 >> "$LOG" 2>&1; echo "exit $?" >> "$LOG"
+timeout "${CHECK_SECONDS:-45}" python3 tests/cuda_sim_check.py 30 >> "$LOG" 2>&1; echo "exit $?" >> "$LOG"
 stamp "3. throughput"
-timeout 150 python3 -m devtools.throughput_gpu --variants --out docs/throughput_gpu.md 2>&1 | tail -20 >> "$LOG"
+timeout "${THROUGHPUT_SECONDS:-150}" python3 -m devtools.throughput_gpu --variants --out docs/throughput_gpu.md 2>&1 | tail -20 >> "$LOG"
 cp docs/throughput_gpu.md "$OUT/" 2>/dev/null
 stamp "4. PPO"
 timeout 90 python3 -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda --device cuda \

@@ -24,10 +24,11 @@ def rel_close(a, b, rel=1e-12):
         return bool(np.all(same | (np.abs(a - b) <= rel * np.maximum(np.abs(a), np.abs(b)))))
 
 
-def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernels="split", episode_steps=None):
+def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernels="split", episode_steps=None,
+                one_set=False):
     """The CPU and the CUDA backend (numpy outputs) over ``steps`` steps (episodes of ``episode_steps``, short ones
     where the autoreset of ``mode`` is to run on the device many times): every output equal, DISABLED's resets
-    through reset_mask."""
+    through reset_mask. one_set: every step on the same output set (what a CUDA graph of one step replays)."""
     kw = {} if scene == "plane" else {"law": law}
     cpu = PennyVectorEnv(n, scene, task, backend="numba", autoreset_mode=mode, max_episode_steps=episode_steps, **kw)
     gpu = PennyVectorEnv(n, scene, task, backend="cuda", outputs="numpy", autoreset_mode=mode,
@@ -39,6 +40,8 @@ def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernel
     impacts = ends = resets = 0
     for k in range(steps):
         a = np.clip(rng.normal(0.6, 0.5, (n, cpu.single_action_space.shape[0])), -1, 1)
+        if one_set:
+            gpu._gpu.parity = 0
         rc, rg = cpu.step(a), gpu.step(a)
         assert rel_close(rc[0], rg[0]) and rel_close(rc[1], rg[1]), f"step {k}: observations or rewards differ"
         assert np.array_equal(rc[2], rg[2]) and np.array_equal(rc[3], rg[3]), f"step {k}: flags differ"
@@ -63,7 +66,8 @@ def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernel
         ends += int((ic["impact_ends"] != 0).sum())
     assert rel_close(cpu.states, gpu.states), "final states differ"
     bitwise = bool(np.array_equal(cpu.states, gpu.states))
-    return {"case": f"vector {scene} {task} {law} {mode.value} {kernels}", "impacts": impacts, "resets": resets,
+    return {"case": f"vector {scene} {task} {law} {mode.value} {kernels}" + (" one-set" if one_set else ""),
+            "impacts": impacts, "resets": resets,
             "episode_steps": episode_steps, "bitwise": bitwise}
 
 
@@ -93,6 +97,7 @@ def main():
     for mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED):
         print(json.dumps(vector_case("stadium", "impacts", "elastic", 6, steps, mode, episode_steps=12)), flush=True)
     print(json.dumps(vector_case("circle", "park", 0.5, 6, steps, AutoresetMode.SAME_STEP, "one", 12)), flush=True)
+    print(json.dumps(vector_case("stadium", "impacts", "plastic", 6, steps, one_set=True)), flush=True)
     for table, law in ((Ellipse(0.15, 0.2), "elastic"), (Stadium(0.1, 0.15), "plastic"), (Circle(0.12), 0.5)):
         print(json.dumps(batch_case(table, law)), flush=True)
 

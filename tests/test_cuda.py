@@ -80,8 +80,8 @@ def test_every_kernel_compiles_to_ptx(kind, cc, device_stand_in):
     device_stand_in(cc)
     out = compile_kernels(kind, cc)
     laws = out.pop("laws")
-    assert set(out) == {"step_envs", "fast_step_envs", "rare_step_envs", "observe_rows", "reset_rows", "advance_batch",
-                        "first_impact_batch"}
+    assert set(out) == {"step_envs", "fast_step_envs", "rare_step_envs", "clear_work_count", "observe_rows", "reset_rows",
+                        "advance_batch", "first_impact_batch"}
     for name, (ptx, _) in out.items():
         assert f".target sm_{cc[0]}{cc[1]}" in ptx and ptx.count(".entry") == 1, name
     # the event loop's kernels carry the law dispatch: the built-in laws compiled for the device (a user's law
@@ -159,13 +159,16 @@ def _simulator(script, *args, timeout=900):
 @pytest.mark.slow
 def test_cuda_backend_equals_cpu_under_the_simulator():
     rows = _simulator("cuda_sim_check.py", "60")
-    assert len(rows) == 12
+    assert len(rows) == 13
     # Short episodes (12 steps) rarely reach a wall; the long rollouts on walled tables must all bounce.
     walled = [row for row in rows if "plane" not in row["case"] and row.get("episode_steps") is None]
     assert all(row["bitwise"] for row in rows)
     assert sum(row["impacts"] for row in walled) > 150 and all(row["impacts"] > 0 for row in walled)
     modes = {row["case"].split()[4] for row in rows if row["case"].startswith("vector")}
     assert modes == {"NextStep", "SameStep", "Disabled"}
+    # every step whole in itself: the same output set step after step (a CUDA graph of one step, replayed)
+    (pinned,) = [row for row in rows if row["case"].endswith("one-set")]
+    assert pinned["impacts"] > 10
     short = [row for row in rows if row.get("episode_steps") == 12]  # (episodes of 12 steps: many device resets)
     assert len(short) == 4 and all(row["resets"] > 6 for row in short)
 

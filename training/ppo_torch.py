@@ -398,8 +398,16 @@ def train(args: Args, env=None, log=print, on_update=None):
                 rollout()
             torch.cuda.current_stream(device).wait_stream(side)
             graph = torch.cuda.CUDAGraph()
-            with torch.cuda.graph(graph):
-                rollout()  # (recorded, not run: the next iterations replay it)
+            from penny_env.backends.cuda_env import capture_guard
+            try:
+                with capture_guard(), torch.cuda.graph(graph, stream=side):
+                    rollout()  # (recorded, not run: the next iterations replay it)
+            except RuntimeError as exc:  # (torch's AcceleratorError too): train on, eagerly, and say so
+                import warnings
+                warnings.warn(f"ppo_torch: the rollout's CUDA graph capture failed ({str(exc).splitlines()[0]}); "
+                              "the rollouts run eagerly (results['cuda_graph'] is False)", RuntimeWarning)
+                torch.cuda.synchronize(device)
+                graph, use_graph = None, False
         else:
             graph.replay()
         global_step += N * T
@@ -457,7 +465,8 @@ def train(args: Args, env=None, log=print, on_update=None):
 
     results = {"env_id": args.env_id, "env_kwargs": args.env_kwargs, "timesteps": global_step,
                "train_seconds": train_seconds, "steps_per_s": global_step / train_seconds, "device": str(device),
-               "cuda_graph": bool(use_graph), "env_on_device": bool(on_torch), "env_seconds": float("nan") if use_graph else timing["env"],
+               "cuda_graph": bool(use_graph), "env_on_device": bool(on_torch),
+               "env_seconds": float("nan") if use_graph else timing["env"],
                "rollout_seconds": rollout_time, "update_seconds": update_time, "curve": curve,
                "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
     # a stand-in env passed by a caller (tests) has no registered id to evaluate on

@@ -20,6 +20,8 @@ the tests check it against the CPU backend on machines without a GPU (tests/test
 """
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from ..envs.functional import SAME_STEP, EnvState, StepResults, kinetic_energy
@@ -76,14 +78,16 @@ class DeviceStep:
         self.masks = self._view(self._upload(np.ones(n, dtype=bool), output=True))
         self.kernels = kernels
         self.work = alloc(n, np.int64)      # the rare kernel's list of envs (backends/env.py, fast_step_env)
-        self.work_counts = alloc(2, np.int64)  # its length, one per output set
+        self.work_count = alloc(1, np.int64)  # its length (cleared by each step's first kernel)
         p, m, k = env._p, env._m, core.k
         if kernels == "split":
-            self.launches = [(self.fns.fast_step_envs.prepare(self.st, self.actions, p, m, k, out, buf, self.work,
-                                                              self.work_counts, slot),
+            clear = self.fns.clear_work_count.prepare(self.work_count)
+            self.launches = [(clear,
+                              self.fns.fast_step_envs.prepare(self.st, self.actions, p, m, k, out, buf, self.work,
+                                                              self.work_count),
                               self.fns.rare_step_envs.prepare(self.st, self.actions, p, m, k, out, buf, self.work,
-                                                              self.work_counts, slot))
-                             for slot, (out, buf) in enumerate(self.sets)]
+                                                              self.work_count))
+                             for out, buf in self.sets]
         else:
             self.launches = [(self.fns.step_envs.prepare(self.st, self.actions, self.consts, out, buf),)
                              for out, buf in self.sets]
@@ -290,6 +294,21 @@ class DeviceStep:
         return self._view(self.reset_obs), info
 
 
+@contextlib.contextmanager
+def capture_guard():
+    """Wrap a CUDA graph capture that holds env steps (CudaGraphStep, training/ppo_torch.py): numba frees
+    device memory lazily, from a queue flushed when it fills (cuMemFree), and Python's cycle collector may drop
+    the last reference to a numba array (an env closed before) at any moment; a cuMemFree while a stream is
+    being captured invalidates the capture. Inside, numba defers its frees (cuda.defer_cleanup), after a
+    collection."""
+    import gc
+
+    from numba import cuda
+    gc.collect()
+    with cuda.defer_cleanup():
+        yield
+
+
 class CudaGraphStep:
     """``env.step`` captured in a CUDA graph (torch.cuda.graph) and replayed: ``step = CudaGraphStep(env)``,
     then ``obs, reward, terminated, truncated, info = step(actions)`` with actions a device tensor of the
@@ -314,7 +333,8 @@ class CudaGraphStep:
                 env.step(self.actions)
         torch.cuda.current_stream(g.device).wait_stream(side)
         self.graph = torch.cuda.CUDAGraph()
-        with torch.cuda.graph(self.graph):
+        # captured on the warm-up's stream: the step's launches already know it (no stream set up while capturing)
+        with capture_guard(), torch.cuda.graph(self.graph, stream=side):
             self.outputs = env.step(self.actions)
 
     def __call__(self, actions):

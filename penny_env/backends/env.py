@@ -31,8 +31,8 @@ prange = range  # the loops below are kernels on CUDA (backends/builder.py)
 class EnvEntryPoints(NamedTuple):
     """The compiled env step of one (target, table kind, task). Single env: ``env_step``, ``initial_state``,
     ``observe_state``; vector env: ``step_envs``, ``reset_rows``, ``observe_rows`` (CPU and python: plain
-    callables; CUDA: builder.CudaLoop kernels), and on CUDA ``fast_step_envs`` and ``rare_step_envs``, the
-    step in two kernels (module comment there). ``unpack``: the plain unpacker of the constants."""
+    callables; CUDA: builder.CudaLoop kernels), and on CUDA ``clear_work_count``, ``fast_step_envs`` and
+    ``rare_step_envs``, the step in two kernels after the list's reset (module comment there). ``unpack``: the plain unpacker of the constants."""
 
     target: str
     env_step: Callable
@@ -44,6 +44,7 @@ class EnvEntryPoints(NamedTuple):
     unpack: Callable
     fast_step_envs: Callable = None
     rare_step_envs: Callable = None
+    clear_work_count: Callable = None
 
 
 # -- the entry points' bodies (plain Python; copied into each build) ------------------------------------------
@@ -130,28 +131,39 @@ def observe_rows_device(rows, st, consts, obs):
 # envs do at most steps, a period the certificate shows free of impacts (scalar.period_is_free: then
 # run_interval is one flow), with the same functions in the same order as step_env; the envs it cannot finish
 # (an impact search, a NEXT_STEP reset, a non-finite action; SAME_STEP's reset after a finished step) go on a
-# list that the rare kernel, one thread per listed env, finishes with step_env itself (or same_step_reset).
+# list that the rare kernel, one thread per listed env, finishes with step_env itself (or same_step_reset). The
+# list's length is cleared by a one-thread kernel before the fast one: every step is whole in itself, so that a
+# CUDA graph may hold any number of steps (a clear by the next step's fast kernel would leave a graph of one
+# step, replayed, appending past the list's end).
 FULL_STEP, RESET_ONLY = 0, 1
 # the fast kernel's per-thread register cap (numba-cuda's max_registers): 80 lets 6 blocks of 128 threads share an
 # SM (37.5 % occupancy; unconstrained it takes about 124, 25 %); ptxas reports its spills (docs/gpu.md)
 FAST_MAX_REGISTERS = 80
 
 
-def enqueue(work, counts, slot, i, what):
+def clear_count_at(i, count):
+    count[i] = 0
+
+
+def clear_work_count(count):
+    """The rare kernel's list emptied (count: its length, one int64), before the step's fast kernel."""
+    for i in prange(count.shape[0]):
+        clear_count_at(i, count)
+
+
+def enqueue(work, count, i, what):
     """Env i onto the rare kernel's list (atomic: threads append concurrently)."""
-    j = cuda.atomic.add(counts, slot, 1)  # noqa: F821 (numba.cuda, in the CUDA build's namespace)
+    j = cuda.atomic.add(count, 0, 1)  # noqa: F821 (numba.cuda, in the CUDA build's namespace)
     work[j] = 2 * i + what
 
 
-def fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot):
+def fast_step_env(i, st, actions, p, m, k, out, buf, work, count):
     """Env i's step where it is a certified impact-free period (module comment above), else onto the list."""
-    if i == 0:
-        counts[1 - slot] = 0  # the other output set's list, for the next step (its rare kernel has run)
     pending = st[10]
     obs = out[0]
     clear_slots(i, buf)
     if p.autoreset == NEXT_STEP and pending[i]:
-        enqueue(work, counts, slot, i, FULL_STEP)
+        enqueue(work, count, i, FULL_STEP)
     else:
         st_i = env_row(st, i)
         a0 = actions[i, 0]
@@ -168,21 +180,21 @@ def fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot):
                 if p.autoreset == NEXT_STEP:
                     pending[i] = done
                 elif p.autoreset == SAME_STEP and done:
-                    enqueue(work, counts, slot, i, RESET_ONLY)
+                    enqueue(work, count, i, RESET_ONLY)
             else:
-                enqueue(work, counts, slot, i, FULL_STEP)
+                enqueue(work, count, i, FULL_STEP)
         else:
-            enqueue(work, counts, slot, i, FULL_STEP)
+            enqueue(work, count, i, FULL_STEP)
 
 
-def fast_step_envs(st, actions, p, m, k, out, buf, work, counts, slot):
+def fast_step_envs(st, actions, p, m, k, out, buf, work, count):
     for i in prange(st.S.shape[1]):
-        fast_step_env(i, st, actions, p, m, k, out, buf, work, counts, slot)
+        fast_step_env(i, st, actions, p, m, k, out, buf, work, count)
 
 
-def rare_step_env(j, st, actions, p, m, k, out, buf, work, counts, slot):
+def rare_step_env(j, st, actions, p, m, k, out, buf, work, count):
     """Entry j of the list the fast kernel made: step_env for the env, or SAME_STEP's reset alone."""
-    if j < counts[slot]:
+    if j < count[0]:
         entry = work[j]
         i = entry // 2
         if entry - 2 * i == FULL_STEP:
@@ -191,9 +203,9 @@ def rare_step_env(j, st, actions, p, m, k, out, buf, work, counts, slot):
             same_step_reset(st, i, p, m, k, out)
 
 
-def rare_step_envs(st, actions, p, m, k, out, buf, work, counts, slot):
+def rare_step_envs(st, actions, p, m, k, out, buf, work, count):
     for j in prange(st.S.shape[1]):
-        rare_step_env(j, st, actions, p, m, k, out, buf, work, counts, slot)
+        rare_step_env(j, st, actions, p, m, k, out, buf, work, count)
 
 
 def _vector_count(args):
@@ -279,12 +291,14 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     if target == "cuda":
         b.namespace.update(FULL_STEP=FULL_STEP, RESET_ONLY=RESET_ONLY, math=math)
         b.copies((functional.transition, env_step, step_env, functional.reset_row, functional.observe_row,
-                  step_env_device, reset_row_device, observe_row_device, enqueue, fast_step_env, rare_step_env))
+                  step_env_device, reset_row_device, observe_row_device, enqueue, fast_step_env, rare_step_env,
+                  clear_count_at))
         step = b.kernel(step_envs_device)
         resets = b.kernel(reset_rows_device)
         observes = b.kernel(observe_rows_device)
         single = initial = observe_state = None
         fast, rare = b.kernel(fast_step_envs, max_registers=max_registers), b.kernel(rare_step_envs)
+        clear = b.kernel(clear_work_count)
     else:
         # inlined into the entries and the loop: called as functions, their many arguments cost more than
         # their work (the loop's bodies write by position, see functional.write_state)
@@ -298,8 +312,8 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
         step = b.loop(step_envs, entry=step_envs_packed, count=_vector_count, inline=STEP_PASTED)
         resets = b.loop(reset_rows, entry=reset_rows_packed, count=_rows_count)
         observes = b.loop(observe_rows, entry=observe_rows_packed, count=_rows_count)
-        fast = rare = None
-    out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack, fast, rare)
+        fast = rare = clear = None
+    out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack, fast, rare, clear)
     if not fresh:
         _ENTRY[key] = out
     return out
