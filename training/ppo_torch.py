@@ -402,12 +402,9 @@ def train(args: Args, env=None, log=print, on_update=None):
             try:
                 with capture_guard(), torch.cuda.graph(graph, stream=side):
                     rollout()  # (recorded, not run: the next iterations replay it)
-            except RuntimeError as exc:  # (torch's AcceleratorError too): train on, eagerly, and say so
-                import warnings
-                warnings.warn(f"ppo_torch: the rollout's CUDA graph capture failed ({str(exc).splitlines()[0]}); "
-                              "the rollouts run eagerly (results['cuda_graph'] is False)", RuntimeWarning)
-                torch.cuda.synchronize(device)
-                graph, use_graph = None, False
+            except RuntimeError as exc:  # (torch's AcceleratorError too; its generators stay in capture mode)
+                raise RuntimeError(f"ppo_torch: the rollout's CUDA graph capture failed: {exc}\n(run with "
+                                   "--cuda-graph off for eager rollouts)") from exc
         else:
             graph.replay()
         global_step += N * T

@@ -69,7 +69,7 @@ def ppo_args(cell, seed: int, a, out: Path):
     from training.witness_study import cell_spec
     env_id, overrides = cell_spec(*cell)
     return Args(env_id=env_id, env_kwargs={**overrides, **reward_fields(env_id, overrides)}, num_envs=a.num_envs,
-                total_timesteps=a.steps,
+                total_timesteps=a.steps, cuda_graph=None if a.cuda_graph is None else a.cuda_graph == "on",
                 seed=seed, device=a.device, env_backend=a.env_backend, num_steps=a.num_steps,
                 minibatch_size=a.minibatch_size, update_epochs=a.update_epochs, gamma=GAMMA, gae_lambda=0.98,
                 eval_episodes=a.eval_episodes, curve_points=a.curve_points, quick=False,
@@ -203,6 +203,8 @@ def parse(argv=None):
     ap.add_argument("--eval-episodes", type=int, default=200)
     ap.add_argument("--device", default="auto")
     ap.add_argument("--env-backend", default=None, help="the vector env's backend (cuda on a GPU: the default there)")
+    ap.add_argument("--cuda-graph", default=None, choices=["on", "off"],
+                    help="replay each rollout from a CUDA graph (default: on where the env is on a GPU)")
     ap.add_argument("--quick", action="store_true", help="a few thousand CPU steps per cell (checks the pipeline)")
     ap.add_argument("--verbose", action="store_true", help="ppo_torch's progress lines")
     ap.add_argument("--out", default=None, help="the report (default runs/scale_rl/scale_rl.md; --quick: a temp dir)")
