@@ -26,11 +26,11 @@ stamp "1. gpu tests"
 stamp "2. CUDA against CPU, step by step"
 timeout "${CHECK_SECONDS:-45}" python3 tests/cuda_sim_check.py 30 >> "$LOG" 2>&1; echo "exit $?" >> "$LOG"
 stamp "3. throughput"
-timeout "${THROUGHPUT_SECONDS:-150}" python3 -m devtools.throughput_gpu --variants --out docs/throughput_gpu.md 2>&1 | tail -20 >> "$LOG"
+timeout "${THROUGHPUT_SECONDS:-150}" python3 -m devtools.throughput_gpu --variants ${THROUGHPUT_ARGS:-} --out docs/throughput_gpu.md 2>&1 | tail -20 >> "$LOG"
 cp docs/throughput_gpu.md "$OUT/" 2>/dev/null
 stamp "4. PPO"
 if [ -n "${PPO_GRAPH_PROBE:-}" ]; then  # a short run with the rollout captured in a graph: its error in full
-  timeout 40 python3 -m training.ppo_torch --env-backend cuda --device cuda --num-envs 4096 --total-timesteps 400000 \
+  timeout "${PROBE_SECONDS:-40}" python3 -m training.ppo_torch --env-backend cuda --device cuda --num-envs 4096 --total-timesteps 400000 \
       --eval-episodes 8 --cuda-graph on --out /tmp/ppo_probe 2>&1 | grep -v Warn | tail -25 >> "$LOG"
 fi
 timeout "${PPO_SECONDS:-90}" python3 -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda \
