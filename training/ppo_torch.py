@@ -22,8 +22,11 @@ Env fields: a config's ``env_kwargs`` and ``--set FIELD=VALUE`` (YAML values, e.
 
 On CUDA with the env's state on the device (``--env-backend cuda``, torch outputs), a whole rollout (the
 policy's forward pass, the sampling, the env's step and the rollout buffer's writes, ``num_steps`` times) is
-captured once in a CUDA graph and replayed at every iteration (``--cuda-graph``, on by default there): the
-host launches one graph per rollout instead of a few hundred kernels. The env's outputs stay valid until the
+captured once in a CUDA graph and replayed at every iteration with ``--cuda-graph on``: the host launches one
+graph per rollout instead of a few hundred kernels. It is off by default: on an H200 (2026-11-26) the capture
+of the whole rollout failed inside torch while the env's step alone captured and replayed bitwise
+(backends/cuda_env.CudaGraphStep, tests/test_cuda.py); eager rollouts trained 30M steps in 14 s there
+(docs/ppo_torch_gpu.md). The env's outputs stay valid until the
 step after the next (penny_env's device step uses two output sets in turn), which is all a rollout needs.
 
 Autoreset: the vector env runs in NEXT_STEP mode. The step that ends an episode returns the episode's last
@@ -72,7 +75,7 @@ class Args:
     device: str = "auto"  # auto: cuda if torch.cuda.is_available(), else cpu
     env_backend: str | None = None  # passed to the vector env as backend= when given (e.g. "cuda")
     env_kwargs: dict = dataclasses.field(default_factory=dict)  # scene/task field overrides of the id
-    cuda_graph: bool | None = None  # capture each rollout in a CUDA graph (None: where the env is on the device)
+    cuda_graph: bool | None = None  # capture each rollout in a CUDA graph (opt-in; None and False: eager)
     curve_points: int = 0  # deterministic evaluations during training, at log-spaced steps (results["curve"])
     num_steps: int = 128  # steps per env per rollout (SB3's n_steps)
     minibatch_size: int = 1024  # SB3's batch_size
@@ -374,7 +377,7 @@ def train(args: Args, env=None, log=print, on_update=None):
             autoreset.copy_(done)
             cur_obs.copy_(to_tensor(next_obs, device))
 
-    use_graph = args.cuda_graph if args.cuda_graph is not None else (device.type == "cuda" and on_torch)
+    use_graph = bool(args.cuda_graph)  # (opt-in: see the module's docstring)
     if use_graph and not (device.type == "cuda" and on_torch):
         raise ValueError("cuda_graph needs device cuda and an env whose outputs are torch tensors on it "
                          "(--env-backend cuda)")
@@ -539,7 +542,7 @@ def parse_cli(argv=None) -> tuple[Args, str | None]:
     ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
                     help="scene/task field overrides of the env id (YAML values), as gymnasium.make(id, **kwargs)")
     ap.add_argument("--cuda-graph", default=None, choices=["on", "off"],
-                    help="capture each rollout in a CUDA graph (default: on where the env's state is on the GPU)")
+                    help="capture each rollout in a CUDA graph (default off: eager rollouts; on needs --env-backend cuda)")
     ap.add_argument("--curve-points", type=int, default=None, help="deterministic evaluations during training")
     ap.add_argument("--num-steps", type=int, default=None, help=f"steps per env per rollout (default {d.num_steps})")
     ap.add_argument("--eval-episodes", type=int, default=None, help=f"final evaluation (default {d.eval_episodes})")

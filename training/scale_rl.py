@@ -204,7 +204,7 @@ def parse(argv=None):
     ap.add_argument("--device", default="auto")
     ap.add_argument("--env-backend", default=None, help="the vector env's backend (cuda on a GPU: the default there)")
     ap.add_argument("--cuda-graph", default=None, choices=["on", "off"],
-                    help="replay each rollout from a CUDA graph (default: on where the env is on a GPU)")
+                    help="replay each rollout from a CUDA graph (default off: eager rollouts, as training.ppo_torch)")
     ap.add_argument("--quick", action="store_true", help="a few thousand CPU steps per cell (checks the pipeline)")
     ap.add_argument("--verbose", action="store_true", help="ppo_torch's progress lines")
     ap.add_argument("--out", default=None, help="the report (default runs/scale_rl/scale_rl.md; --quick: a temp dir)")

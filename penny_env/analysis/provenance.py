@@ -120,12 +120,9 @@ REPORTS = {
                                ("devtools/throughput_gpu.py", "devtools/throughput.py") + _CUDA + _ENV + _PHYSICS
                                + _TABLES),
     "docs/ppo_torch_gpu.md": ("python -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda "
-                              "--device cuda --curve-points 5 --report docs/ppo_torch_gpu.md",
+                              "--device cuda --curve-points 5 --cuda-graph off --report docs/ppo_torch_gpu.md",
                               ("training/ppo_torch.py", "configs/train/ppo_torch_gpu.yaml") + _CUDA + _ENV + _PHYSICS
                               + _TABLES),
-    "docs/scale_rl.md": ("python -m training.scale_rl --out docs/scale_rl.md",
-                         ("training/scale_rl.py", "training/ppo_torch.py", "training/fair_pure_rl.py",
-                          "training/witness_study.py", "training/study_report.py") + _CUDA + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
@@ -156,8 +153,7 @@ MODULE_REPORTS = {"penny_env.analysis.bench_solvers": "docs/bench_solvers.md",
                   "devtools.compile_time": "docs/compile_time.md",
                   "training.ppo_compare": "docs/ppo_torch.md",
                   "devtools.throughput_gpu": "docs/throughput_gpu.md",
-                  "training.ppo_torch": "docs/ppo_torch_gpu.md",
-                  "training.scale_rl": "docs/scale_rl.md"}
+                  "training.ppo_torch": "docs/ppo_torch_gpu.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")
