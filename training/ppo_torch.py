@@ -457,7 +457,8 @@ def train(args: Args, env=None, log=print, on_update=None):
 
     results = {"env_id": args.env_id, "env_kwargs": args.env_kwargs, "timesteps": global_step,
                "train_seconds": train_seconds, "steps_per_s": global_step / train_seconds, "device": str(device),
-               "cuda_graph": bool(use_graph), "env_on_device": bool(on_torch), "env_seconds": float("nan") if use_graph else timing["env"],
+               "cuda_graph": bool(use_graph), "env_on_device": bool(on_torch),
+               "env_seconds": float("nan") if use_graph else timing["env"],
                "rollout_seconds": rollout_time, "update_seconds": update_time, "curve": curve,
                "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
     # a stand-in env passed by a caller (tests) has no registered id to evaluate on
