@@ -74,7 +74,8 @@ def main():
                 best[who][scene] = min(best[who].get(scene, float("inf")), t)
         print(f"round {k + 1}: " + ", ".join(f"{s} {best['this'][s] / best['other'][s]:.3f}" for s in best["this"]),
               flush=True)
-    print(f"N = {args.n}, {args.steps} control periods, best of {args.rounds} alternated runs, {args.clock} time, speed {args.speed}, "
+    print(f"N = {args.n}, {args.steps} control periods, best of {args.rounds} alternated runs, {args.clock} time, "
+          f"speed {args.speed}, "
           f"NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}")
     print("| scene | this [s] | other [s] | this / other |")
     print("|---|---|---|---|")

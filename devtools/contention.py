@@ -126,7 +126,8 @@ def report(rows, n: int, steps: int, repeats: int, command: str, load_before: fl
              "runs every setup quiet, then busy, in turn); busy: one "
              "spinning Python process beside it (a learner's core). Ratios: busy / quiet, and each setup's rate "
              "over the penny_env default's.", "",
-             "| setup | layer | threads | quiet [M steps/s] | busy [M steps/s] | busy / quiet | quiet / default | busy / default |",
+             "| setup | layer | threads | quiet [M steps/s] | busy [M steps/s] | busy / quiet | quiet / default "
+             "| busy / default |",
              "|---|---|---:|---:|---:|---:|---:|---:|"]
     # (the load at the end includes this command's own threads and busy process: only the start tells
     # whether other work was running)

@@ -198,7 +198,8 @@ def main(argv=None) -> int:
                 if ptxas:
                     u = ptxas_usage(ptx, cc, ptxas, a.max_registers if name == "fast_step_envs" else None)
                     occ = occupancy(u["registers"], cc)
-                    line += (f"  {u['registers']:4d} registers  {u['stack']:4d} B stack  {u['spill_stores']}/{u['spill_loads']} B "
+                    line += (f"  {u['registers']:4d} registers  {u['stack']:4d} B stack  "
+                             f"{u['spill_stores']}/{u['spill_loads']} B "
                              f"spills  occupancy {occ:.1%}")
                     rows.append((f"sm_{cc[0]}{cc[1]}", variant_name(kind), name, u, occ))
                 print(line, flush=True)

@@ -160,7 +160,8 @@ def main(argv: list[str] | None = None) -> str:
     presets = (WALLED, "PennyReach-Plane-v0") if quick else VECTOR_PRESETS
     lines += ["", "## Vector environments (env-steps per second, random actions)", "",
               f"PennyVectorEnv's default backend here: **{backend}**.", "",
-              "| env | N | PennyVectorEnv | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector | peak memory per env |",
+              "| env | N | PennyVectorEnv | SyncVectorEnv(PennyEnv) | native / sync | CartPole-v1 native vector "
+              "| peak memory per env |",
               "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     big = []  # (env, N, native rate, sync rate) at the largest N
     for env_id in presets:

@@ -143,7 +143,8 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--ids", nargs="*", default=None, help="env ids (default: every id both trees register)")
     ap.add_argument("--sizes", nargs="*", type=int, default=None)
     ap.add_argument("--single-steps", type=int, default=None)
-    ap.add_argument("--vector-budget", type=int, default=None, help="env-steps per vector measurement (3 to 4000 steps of the vector env)")
+    ap.add_argument("--vector-budget", type=int, default=None,
+                    help="env-steps per vector measurement (3 to 4000 steps of the vector env)")
     args = ap.parse_args(argv)
     if args.quick:
         args.rounds, args.ids = 1, args.ids or list(QUICK_IDS)

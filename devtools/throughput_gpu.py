@@ -173,7 +173,8 @@ def main(argv: list[str] | None = None) -> int:
               "replay: the step captured in a CUDA graph (backends/cuda_env.CudaGraphStep).", "",
               *table(["N", "env.step", "kernels alone", "graph replay", "env.step / kernels", "CPU (numba, all cores)",
                       "env.step / CPU", "device memory per env"], rows), "",
-              f"Launches: {'prepared once (builder.PreparedLaunch)' if prepared else 'through numba dispatcher (the prepared path failed here)'}.", "",
+              "Launches: " + ("prepared once (builder.PreparedLaunch)" if prepared
+                              else "through numba dispatcher (the prepared path failed here)") + ".", "",
               f"Best env.step: {best[0]:,.0f} env-steps/s at N = {best[1]:,} (targets: at least 1e9 at the best N, "
               "0.8 of the kernels alone at N >= 65,536, 1.2e7 at N = 4096)."]
     if var_rows:

@@ -6,8 +6,8 @@ from . import batch  # penny_env.batch after `import penny_env` (the physics it 
 
 __version__ = "0.1.0"
 __all__ = ["PennyParams", "SolverSettings", "Table", "Ellipse", "Circle", "Stadium", "RoundedRectangle", "ConvexTable",
-           "register_table", "register_law", "simulate", "impact_map", "Trajectory", "PennyEnv", "PennyGoalEnv", "PennyVectorEnv", "register_envs", "make_env",
-           "batch"]
+           "register_table", "register_law", "simulate", "impact_map", "Trajectory", "PennyEnv", "PennyGoalEnv", "PennyVectorEnv",
+           "register_envs", "make_env", "batch"]
 
 
 # the Gymnasium ids (penny_env/presets/envs.yaml): gymnasium.make("penny_env:PennyReach-Ellipse-v0") works

@@ -159,7 +159,8 @@ def _cuda_target():
 
     from .backends.builder import cuda_available
     if importlib.util.find_spec("numba_cuda") is None:
-        raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, pip install -e \".[cuda]\" (docs/gpu.md)")
+        raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, "
+                         "pip install -e \".[cuda]\" (docs/gpu.md)")
     if not cuda_available():
         raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
     return "cuda"

@@ -11,7 +11,8 @@ import pytest
 from penny_env.analysis import reference
 
 # scipy (solve_ivp, the other integrators) and matplotlib (the plots) are optional extras ([bench], [plot])
-needs_scipy = pytest.mark.skipif(importlib.util.find_spec("scipy") is None, reason="scipy (the penny-env[bench] extra) is not installed")
+needs_scipy = pytest.mark.skipif(importlib.util.find_spec("scipy") is None,
+                                 reason="scipy (the penny-env[bench] extra) is not installed")
 needs_matplotlib = pytest.mark.skipif(importlib.util.find_spec("matplotlib") is None,
                                       reason="matplotlib (the penny-env[plot] extra) is not installed")
 

@@ -41,7 +41,8 @@ def test_flow_first_impact_impact_map():
     assert np.all(np.isfinite(t_hit)) and set(end.tolist()) <= {1, -1}
     pre = pb.flow(STATES, [0.0, 0.0], t_hit)
     post = pb.impact_map(pre, end, table=CIRCLE, law="elastic")
-    ke = lambda s: 0.5 * (P.rolling_inertia * s[:, 4] ** 2 + P.J * s[:, 5] ** 2)
+    def ke(s):
+        return 0.5 * (P.rolling_inertia * s[:, 4] ** 2 + P.J * s[:, 5] ** 2)
     assert np.allclose(ke(post), ke(pre), rtol=1e-12)
 
 

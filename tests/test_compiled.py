@@ -74,7 +74,8 @@ def test_compiled_flow_on_the_plane_equals_numpy_flow(seed, steer):
     assert log is None
     assert np.array_equal(out, flow(S, acc1, acc2, 0.37, 0.01))
     fns = batch_entry_points("cpu", -1).functions  # the open plane's variant
-    assert fns["flow_penny"](tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01) == flow_penny(tuple(S[:, 0]), acc1[0], acc2[0], 0.37, 0.01)
+    s0 = tuple(S[:, 0])
+    assert fns["flow_penny"](s0, acc1[0], acc2[0], 0.37, 0.01) == flow_penny(s0, acc1[0], acc2[0], 0.37, 0.01)
 
 
 @pytest.mark.parametrize("cis, limit", [(cis_small, SMALL_ANGLE), (cis_medium, MEDIUM_ANGLE)])

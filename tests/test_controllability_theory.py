@@ -270,8 +270,8 @@ def test_t2_stopping_impact_then_braking_parks_at_the_wall(law, beta):
     rolling at 2 rad/s into the stadium's flat side at incidence beta, with the rest-making spin, comes out of its only
     impact with theta_dot = 0 (to round-off) and its contact point within R of the wall; steering alone then brakes
     the spin within the free angle pi - 2 beta, and it is at rest there (no second impact; with e = 0 the end stays
-    pressed on the wall: later touches at round-off speeds change nothing). Through PennyProbeSteer-Stadium-* with that start and the
-    target at the rest point, the same actions end the episode with is_success."""
+    pressed on the wall: later touches at round-off speeds change nothing). Through PennyProbeSteer-Stadium-* with that
+    start and the target at the rest point, the same actions end the episode with is_success."""
     table = TABLES["stadium"]
     phi = math.pi / 2 - beta  # the front end meets the flat side y = radius = 0.1 at (0.02, 0.1)
     S = np.array([0.02 - P.R * math.cos(phi), 0.1 - P.R * math.sin(phi), 0.0, phi, 2.0, 0.0])

@@ -24,7 +24,9 @@ def test_ids_cover_tasks_scenes_laws_actuations():
     scenes, tasks, laws, acts = set(), set(), set(), set()
     for kw in presets.values():
         sc, tk = resolve(**kw)
-        scenes.add(sc.table["kind"]); tasks.add(tk.kind); acts.add(sc.actuation)
+        scenes.add(sc.table["kind"])
+        tasks.add(tk.kind)
+        acts.add(sc.actuation)
         laws.add(sc.law if isinstance(sc.law, str) else "restitution")
     assert scenes == {"ellipse", "circle", "stadium", "rounded_rectangle", "none"}
     assert tasks == {"reach", "park", "impacts"}
@@ -41,7 +43,8 @@ def test_import_is_light():
 
 
 def test_make_without_import():
-    code = "import gymnasium as gym; e = gym.make('penny_env:PennyPark-Circle-v0'); e.reset(seed=0); print(type(e.unwrapped).__name__)"
+    code = ("import gymnasium as gym; e = gym.make('penny_env:PennyPark-Circle-v0'); e.reset(seed=0); "
+            "print(type(e.unwrapped).__name__)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "PennyEnv"
 

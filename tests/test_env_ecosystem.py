@@ -85,7 +85,8 @@ def test_unknown_keywords_are_type_errors_and_config_errors():
         PennyEnv(control_dt=-1.0)
 
 
-@pytest.mark.parametrize("bad", ["left", None, [True, False], np.array([1 + 1j, 0]), [None, 0.0], b"ab", [True, 0.0], ["0.5", 0.0]])
+@pytest.mark.parametrize("bad", ["left", None, [True, False], np.array([1 + 1j, 0]), [None, 0.0], b"ab", [True, 0.0],
+                                 ["0.5", 0.0]])
 def test_wrong_action_types_are_type_errors(bad):
     env = PennyEnv()
     env.reset(seed=0)

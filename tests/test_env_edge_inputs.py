@@ -71,7 +71,7 @@ def test_seed_range_edges():
 def _interrupting(fn, after):
     """fn, but raising KeyboardInterrupt (as a Ctrl-C would) once it has run, state already changed."""
     def wrapped(*args):
-        out = fn(*args)
+        fn(*args)
         after()
         raise KeyboardInterrupt
     return wrapped

@@ -1,6 +1,5 @@
 """The README's main job leaves the checkout clean (issue 21.3): its commands write into git-ignored
 output folders (runs/), never over a tracked file; so do the README's RL Zoo commands (logs/)."""
-import importlib.util
 import os
 import re
 import shlex

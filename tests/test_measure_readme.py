@@ -1,5 +1,4 @@
 """training.measure_readme (issue 21.8): runs the README's main job step by step and reports each step's cost."""
-import importlib.util
 import json
 import re
 import shutil
@@ -129,7 +128,8 @@ def test_readme_sentences_come_from_the_measurement(tmp_path):
     new = copy.read_text()
     assert measure_readme.readme_marked(new, "main") == " ".join(main.split())
     assert measure_readme.readme_marked(new, "tests").startswith("Not yet measured")
-    strip = lambda t: re.sub(r"<!-- readme-costs:(\w+) -->.*?<!-- /readme-costs:\1 -->", "", t, flags=re.S)
+    def strip(t):
+        return re.sub(r"<!-- readme-costs:(\w+) -->.*?<!-- /readme-costs:\1 -->", "", t, flags=re.S)
     assert strip(new) == strip(readme)
     with pytest.raises(SystemExit):
         measure_readme.main(["--quick", "--readme", str(copy)])

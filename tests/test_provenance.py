@@ -3,7 +3,6 @@ make its numbers (penny_env/analysis/provenance.py), and this test compares it w
 sources, naming the report and the command that regenerates it."""
 import re
 import shutil
-from pathlib import Path
 
 import pytest
 

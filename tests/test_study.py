@@ -4,7 +4,6 @@ import csv
 import json
 import sys
 
-import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3", reason="the study trains SB3 agents")

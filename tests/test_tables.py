@@ -190,7 +190,8 @@ def test_a_registered_table_and_law_run_plain_and_compiled(registered):
     S = np.array([[0.0, 0.0, 0.0, 0.3, 10.0, 0.7], [0.05, -0.02, 1.0, 2.0, -8.0, -0.3]])
     plain = pb.simulate(S, table=table, law=law, t_final=3.0, backend="python")
     assert plain.impact_counts.min() >= 3
-    e = 0.5 * (pe.PennyParams().rolling_inertia * plain.final_states[:, 4] ** 2 + pe.PennyParams().J * plain.final_states[:, 5] ** 2)
+    e = 0.5 * (pe.PennyParams().rolling_inertia * plain.final_states[:, 4] ** 2
+               + pe.PennyParams().J * plain.final_states[:, 5] ** 2)
     e0 = 0.5 * (pe.PennyParams().rolling_inertia * S[:, 4] ** 2 + pe.PennyParams().J * S[:, 5] ** 2)
     assert np.all(e < e0)  # restitution 0.4 loses energy
     if not available():

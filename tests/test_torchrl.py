@@ -1,5 +1,6 @@
 """TorchRL: GymEnv on the registered ids, GymWrapper on the vector env (DISABLED and SAME_STEP
-autoreset, fixed-width info arrays), short rollouts through the single-process collector (SyncDataCollector, Collector since 0.11)."""
+autoreset, fixed-width info arrays), short rollouts through the single-process collector (SyncDataCollector,
+Collector since 0.11)."""
 import numpy as np
 import pytest
 

@@ -11,8 +11,8 @@ from penny_env.backends.choice import available as numba_available
 from penny_env.physics.flows import kinetic_energy
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MIN_GAP
-from penny_env.physics.scalar import (NO_ARC, advance_listing, advance_through_into, advance_through_listing, impact_buffers, impacts_of,
-                                      overflowed, scalar_model)
+from penny_env.physics.scalar import (NO_ARC, advance_listing, advance_through_into, advance_through_listing, impact_buffers,
+                                      impacts_of, overflowed, scalar_model)
 
 PARAMS = pe.PennyParams()
 ELASTIC = make_law("elastic")

@@ -92,7 +92,8 @@ def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_ep
     r = run_episodes(cfg["env_id"], lambda o: model.predict(o, deterministic=True)[0], episodes, seed)
     k = int(np.sum(r["success"]))
     lo, hi = wilson_interval(k, episodes)
-    res = {"env_id": cfg["env_id"], "algo": cfg["algo"], "model": str(run_dir / model_file), "episodes": episodes, "seed": seed, "successes": k,
+    res = {"env_id": cfg["env_id"], "algo": cfg["algo"], "model": str(run_dir / model_file), "episodes": episodes, "seed": seed,
+           "successes": k,
            "success_rate": k / episodes, "ci95_wilson": [lo, hi], "mean_return": float(np.mean(r["return"])),
            "mean_impacts": float(np.mean(r["impacts"]))}
     if video_episodes > 0 and importlib.util.find_spec("moviepy") is None:

@@ -375,7 +375,6 @@ def _cells(rows):
 
 def write_report(path: Path, rows, curves, meta):
     cfg = meta["config"]
-    agents = meta["agents"]
     lines = ["# A fair chance for pure RL on the single-input probes: PPO, SAC and SAC with witness transitions",
              "", *meta["machine"],
              f"- command: `{meta['command']}` ({meta['wall_s']:.0f} s wall, finished {meta['date']})",
@@ -539,7 +538,8 @@ def what_works(rows, cells, summ):
     if imi:
         ran = [c for c in all_cells if c in imi]
         para.append(f"A flat torque policy (bc, dagger, ppo, sac, sac_witness) meets the goal in {len(flat_met)} of "
-                    f"the {len(all_cells)} cells ({', '.join(f'{c[0].lower()} {TABLE_NAMES[c[1]]} {c[2]}' for c in flat_met) or 'none'}); "
+                    f"the {len(all_cells)} cells "
+                    f"({', '.join(f'{c[0].lower()} {TABLE_NAMES[c[1]]} {c[2]}' for c in flat_met) or 'none'}); "
                     f"the option agent of fair_rl.md, which learns from the observation which witness controller to "
                     f"run after each impact, meets it in {len(opt)} of the {len(ran)} cells it ran.")
     pure_met = [c for c in cells if any(a in ("ppo", "sac") for a in met_by.get(c, []))]

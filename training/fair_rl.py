@@ -50,7 +50,7 @@ import numpy as np
 
 from penny_env.envs.tasks.park import rest_speed
 from training.study_report import clopper_pearson
-from training.witness import FAMILIES, V_SWITCH, Witness, positive_int, run_episode
+from training.witness import V_SWITCH, Witness, positive_int
 from training.witness_study import LAWS, PROBE_TASKS, TABLE_NAMES, cell_spec
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -412,7 +412,6 @@ def _f(v, spec=".2f"):
 
 
 def write_report(path: Path, rows, curves, cfg, meta):
-    from penny_env.analysis.common import machine_lines
     lines = ["# A fair chance for learned agents on the single-input probes: imitation of the witnesses", "",
              *meta["machine"], f"- command: `{meta['command']}` ({meta['wall_s']:.0f} s wall, finished {meta['date']})",
              "- regenerate: run the command above from the repository root (one process, torch and numba on one "

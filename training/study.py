@@ -223,7 +223,8 @@ def check_ray():
     try:
         import ray  # noqa: F401
     except ImportError:
-        raise ValueError('--ray needs Ray, which is not installed: the ray extra (pip install -e ".[ray]" in the clone)') from None
+        raise ValueError('--ray needs Ray, which is not installed: '
+                         'the ray extra (pip install -e ".[ray]" in the clone)') from None
 
 
 def _ray(todo, runs, workers):

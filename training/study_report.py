@@ -259,8 +259,10 @@ def write_report(cfg, jobs, runs, out, argv=(), seconds=0.0):
     lines += [f"Jobs: {len(jobs)} ((cell, agent, seed)); job time {job_seconds:.0f} s in all ({cpu_seconds:.0f} s CPU, "
               f"{cpu_seconds / cores / 60:.0f} min on this machine's {cores} cores if nothing else runs); "
               f"the jobs ran from {span[0]} to {span[1]} UTC ({span[2] / 60:.0f} min, from their result files); wall "
-              f"time of this invocation {seconds:.0f} s (finished jobs are not rerun). Seeds {cfg['seeds']}; {cfg['eval_episodes']} evaluation episodes per job; "
-              f"budgets {cfg['timesteps']} env steps" + (f", per probe {cfg['timesteps_per_probe']}" if cfg.get("timesteps_per_probe") else "")
+              f"time of this invocation {seconds:.0f} s (finished jobs are not rerun). Seeds {cfg['seeds']}; "
+              f"{cfg['eval_episodes']} evaluation episodes per job; "
+              f"budgets {cfg['timesteps']} env steps"
+              + (f", per probe {cfg['timesteps_per_probe']}" if cfg.get("timesteps_per_probe") else "")
               + ". Probe tasks: [study_probes.md](study_probes.md).", ""]
     lines += ["## Proven (not observed)", "",
               "- On the open plane with u2 = 0 (steer only), (I + m R^2) theta'' = 0: theta_dot is conserved, so the "

@@ -39,7 +39,6 @@ Field overrides are applied like ``gymnasium.make`` keywords (values read as YAM
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from dataclasses import dataclass, field
 

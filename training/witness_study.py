@@ -23,8 +23,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from training.study_report import clopper_pearson
 from training.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, learnability, theorem_of
 from training.witness import PROBES, Witness, positive_int

@@ -58,10 +58,12 @@ def run(quick: bool = False, repeats: int | None = None):
         floor = sc.raw.get("float64_input_sensitivity", {}).get("abs_diff_impact_times")
         rows.append(dict(scene=sc.name, n=n, t_sim=t_sim, t_ivp=t_ivp, m_sim=m_sim, m_ivp=m_ivp, n_both=len(both),
                          err_sim=float(err_sim), err_ivp=float(err_ivp),
-                         n_unres=int(np.sum(unres[:n])), ivp_impacts=r_ivp.n_impacts, ivp_final_time=r_ivp.final_time, ivp_status=r_ivp.status,
+                         n_unres=int(np.sum(unres[:n])), ivp_impacts=r_ivp.n_impacts, ivp_final_time=r_ivp.final_time,
+                         ivp_status=r_ivp.status,
                          ivp_outside=_outside(r_ivp, sc), sim_outside=_outside(r_sim, sc), nfev=r_ivp.n_steps,
                          floor=max(float(v) for v in floor[:n]) if floor else float("nan"),
-                         min_rel_speed=float(np.nanmin(sc.rel_normal_speed[:n])) if sc.rel_normal_speed is not None else float("nan")))
+                         min_rel_speed=(float(np.nanmin(sc.rel_normal_speed[:n])) if sc.rel_normal_speed is not None
+                                        else float("nan"))))
     return rows
 
 
@@ -97,7 +99,8 @@ def report(rows, argv) -> list[str]:
           "(penny_env/analysis/reference_data/paper_scenes.json); impacts are matched by time and end (order-preserving); "
           "'err' is the max |t - t_ref| over the reference impacts that both methods found (the error ratio is "
           "solve_ivp err / penny_env err on that common set); 'penny_env err, all its matches' is over every impact "
-          "penny_env matched (it includes the grazing impacts that solve_ivp misses). 'float64 floor' is the change of the reference impact "
+          "penny_env matched (it includes the grazing impacts that solve_ivp misses). "
+          "'float64 floor' is the change of the reference impact "
           "times when the scene's inputs are rounded to binary64 (the best a float64 code can do).", ""]
     hdr = ["scene", "penny_env [ms]", "solve_ivp [ms]", "speed-up", "impacts both found",
            "penny_env err [s]", "solve_ivp err [s]", "error ratio", "penny_env err, all its matches [s]",

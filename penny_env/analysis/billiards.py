@@ -449,7 +449,8 @@ def main(argv=None):
                 ax = axes[r, q]
                 co = cases[(tname, lname)].coords
                 other = co[2] if coord == 1 else co[1]
-                ax.scatter(co[0].ravel(), co[coord].ravel(), c=other.ravel(), s=0.3, cmap="twilight" if coord == 1 else "coolwarm",
+                ax.scatter(co[0].ravel(), co[coord].ravel(), c=other.ravel(), s=0.3,
+                           cmap="twilight" if coord == 1 else "coolwarm",
                            vmin=-np.pi if coord == 1 else -np.pi / 2, vmax=np.pi if coord == 1 else np.pi / 2, rasterized=True)
                 ax.set_ylim(*ylim)
                 ax.set_title(f"{tname}, {lname}", fontsize=8)
@@ -506,7 +507,8 @@ def main(argv=None):
         top = 3 * max(finals + [0.05])
         ax.set_ylim(-top, top)
         ax.axhline(0, color="0.6", lw=0.5)
-        ax.set(xlabel="time [s]", ylabel="running flow exponents [1/s]", title=f"{tname}, elastic: all 5, every orbit (dotted: rolling starts)")
+        ax.set(xlabel="time [s]", ylabel="running flow exponents [1/s]",
+               title=f"{tname}, elastic: all 5, every orbit (dotted: rolling starts)")
     save(fig, "convergence_flow", dpi=70)
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -700,7 +702,8 @@ def _write(out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons,
               "(lambda, 0, -lambda). The flow adds two zeros, along the flow and along the energy (theta, left out, is "
               "a third): (l, 0, 0, 0, -l) with l = lambda / (mean flight time) (Abramov). For dissipative laws nothing "
               "forces a zero.", "",
-              "Flow, elastic walls (per second, medians over the orbits). Cross-checks: lambda1 of the return map over the mean flight time (Abramov's "
+              "Flow, elastic walls (per second, medians over the orbits). "
+              "Cross-checks: lambda1 of the return map over the mean flight time (Abramov's "
               "formula) and the two-trajectory estimate of `penny_env.analysis.dynamics.lyapunov_exponents` (started "
               f"from the same states, {cfg['two_traj_t']:g} s, fitted while the separation is < 1e-4):", "",
               *table(["table", "starts", "orbits", "l1", "l2", "l3", "l4", "l5", "sum", "l1 map / mean flight",

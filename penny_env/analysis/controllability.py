@@ -51,7 +51,8 @@ def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[
         k, name = UNACTUATED[act]
         v = rs.final_states[:, k]
         rows.append({"actuation": act, "scene": scene, "horizon": T, "speed": name, "initial": START[k],
-                     "min": float(v.min()), "max": float(v.max()), "min_abs": float(np.abs(v).min()), "spread": float(v.max() - v.min()),
+                     "min": float(v.min()), "max": float(v.max()), "min_abs": float(np.abs(v).min()),
+                     "spread": float(v.max() - v.min()),
                      "with_impacts": float(np.mean(rs.impact_counts > 0)),
                      "mean_impacts": float(rs.impact_counts.mean()), "final": rs.final_states[:, 4:6].copy()})
     return rows
@@ -98,11 +99,13 @@ def main(argv=None):
     lines += [__doc__.split("\n\n", 2)[2].strip(), "",
               "## What the samples show", "", *verdicts(rows), "",
               f"## Unactuated speed over the sampled reachable sets ({samples} control sequences each)", "",
-              "| control | scene | horizon [s] | speed | initial | min | max | closest to 0 | sequences with impacts | impacts per sequence |",
+              "| control | scene | horizon [s] | speed | initial | min | max | closest to 0 | sequences with impacts "
+              "| impacts per sequence |",
               "|---|---|---:|---|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['actuation']} only | {r['scene']} | {r['horizon']:g} | {r['speed']} | {r['initial']:g} | "
-                     f"{r['min']:.4g} | {r['max']:.4g} | {r['min_abs']:.3g} | {r['with_impacts']:.0%} | {r['mean_impacts']:.2f} |")
+                     f"{r['min']:.4g} | {r['max']:.4g} | {r['min_abs']:.3g} | {r['with_impacts']:.0%} | "
+                     f"{r['mean_impacts']:.2f} |")
     lines += ["", f"Final (theta_dot, phi_dot) of every sampled sequence at t = {max(horizons):g} s: on the open plane "
               "the unactuated speed is a vertical or horizontal line; impacts spread it.", "", f"![speeds]({png.name})", "",
               "## Scope", "",

@@ -153,7 +153,8 @@ def _initial_states(table, n, rng, params):
     return S
 
 
-TABLES = {"circle r = 0.2": {"kind": "circle", "radius": 0.2}, "ellipse 0.15 x 0.2 (paper)": {"kind": "ellipse", "a": 0.15, "b": 0.2},
+TABLES = {"circle r = 0.2": {"kind": "circle", "radius": 0.2},
+          "ellipse 0.15 x 0.2 (paper)": {"kind": "ellipse", "a": 0.15, "b": 0.2},
           "stadium r = 0.1, length 0.1": {"kind": "stadium", "radius": 0.1, "length": 0.1}}
 
 

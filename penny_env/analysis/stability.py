@@ -158,7 +158,10 @@ def repro_sim(state, params, table, law, **kw):
 # cases
 # ------------------------------------------------------------------------------------------------
 
-@case("grazing cascades (paper, plastic scenes)", "the paper's plastic scenes (25 impacts, normal velocities decaying geometrically): impact-time error and missed impacts vs the reference (impacts below float64 resolution, i.e. whose wall excursion is within the contact tolerance, may be missed), penetration, energy")
+@case("grazing cascades (paper, plastic scenes)",
+      "the paper's plastic scenes (25 impacts, normal velocities decaying geometrically): impact-time error and missed "
+      "impacts vs the reference (impacts below float64 resolution, i.e. whose wall excursion is within the contact "
+      "tolerance, may be missed), penetration, energy")
 def _grazing(quick):
     from .matching import match_impacts, unresolvable_mask
     from .reference import paper_scenes
@@ -201,7 +204,8 @@ def _tangent_state(r, d, W=10.0, w=2.0, R=0.01):
     return [z0.real, z0.imag, 0.0, phi0, W, w], 2 * math.pi / w
 
 
-@case("near-tangent approaches", "detection of impacts whose path crosses the wall by |d| (d < 0) or misses it by d (d > 0); penetration")
+@case("near-tangent approaches",
+      "detection of impacts whose path crosses the wall by |d| (d < 0) or misses it by d (d > 0); penetration")
 def _near_tangent(quick):
     table = Circle(0.2)
     params = PennyParams()
@@ -224,7 +228,9 @@ def _near_tangent(quick):
     return out
 
 
-@case("both ends touching at once", "thin ellipse with b slightly above R, penny across it (spinning and rolling): NaN, penetration, energy, rests; b below R (1 + MIN_GAP) must be refused (documented limit)")
+@case("both ends touching at once",
+      "thin ellipse with b slightly above R, penny across it (spinning and rolling): NaN, penetration, energy, rests; "
+      "b below R (1 + MIN_GAP) must be refused (documented limit)")
 def _both_ends(quick):
     params = PennyParams()
     R = params.R
@@ -240,7 +246,9 @@ def _both_ends(quick):
     return out
 
 
-@case("fast spin / fast rolling / tiny speeds", "|phi_dot| up to 1e4 rad/s, theta_dot up to 1e3 rad/s, speeds down to 1e-9: energy drift, penetration, impacts per second")
+@case("fast spin / fast rolling / tiny speeds",
+      "|phi_dot| up to 1e4 rad/s, theta_dot up to 1e3 rad/s, speeds down to 1e-9: energy drift, penetration, "
+      "impacts per second")
 def _speeds(quick):
     params = PennyParams()
     table = Circle(0.2)
@@ -267,7 +275,8 @@ def _speeds(quick):
     return out
 
 
-@case("stiff inertia ratios", "J/(m R^2) and I/(m R^2) from 1e-4 to 1e2 on the paper's ellipse, elastic and plastic: energy, penetration")
+@case("stiff inertia ratios",
+      "J/(m R^2) and I/(m R^2) from 1e-4 to 1e2 on the paper's ellipse, elastic and plastic: energy, penetration")
 def _inertia(quick):
     out = []
     ratios = [1e-4, 1e-2, 1.0, 1e2] if not quick else [1e-4, 1e2]
@@ -294,7 +303,8 @@ def _outward_after(tr, params, table):
     return float(np.max(a * S[4] + b * S[5]))
 
 
-@case("plastic sticking (I > m R^2)", "plastic law with I = 3 and 10 m R^2: the end must not keep moving outward after an impact; energy never increases")
+@case("plastic sticking (I > m R^2)",
+      "plastic law with I = 3 and 10 m R^2: the end must not keep moving outward after an impact; energy never increases")
 def _sticking(quick):
     out = []
     table = Ellipse(0.15, 0.2)
@@ -315,7 +325,9 @@ def _sticking(quick):
     return out
 
 
-@case("Zeno accumulation", "restitution 0.5 (and plastic) with a control torque pushing the front end into the wall: finishes, rest detected, no penetration")
+@case("Zeno accumulation",
+      "restitution 0.5 (and plastic) with a control torque pushing the front end into the wall: finishes, rest detected, "
+      "no penetration")
 def _zeno(quick):
     params = PennyParams()
     table = Circle(0.2)
@@ -351,7 +363,9 @@ def _zeno(quick):
     return out
 
 
-@case("thin tables", "ellipse with b close to R (inradius just above R), penny along the long axis rolling and spinning; tables with inradius <= R, and those narrower than R (1 + MIN_GAP), must be refused with ValueError (documented limit)")
+@case("thin tables",
+      "ellipse with b close to R (inradius just above R), penny along the long axis rolling and spinning; tables with "
+      "inradius <= R, and those narrower than R (1 + MIN_GAP), must be refused with ValueError (documented limit)")
 def _thin(quick):
     params = PennyParams()
     R = params.R
@@ -376,7 +390,9 @@ def _thin(quick):
     return out
 
 
-@case("R close to the table's size", "circle of radius R (1 + eps) and a stadium barely wider than the penny: NaN, penetration, energy; radii below R (1 + MIN_GAP) must be refused (documented limit)")
+@case("R close to the table's size",
+      "circle of radius R (1 + eps) and a stadium barely wider than the penny: NaN, penetration, energy; radii below "
+      "R (1 + MIN_GAP) must be refused (documented limit)")
 def _tight(quick):
     params = PennyParams()
     R = params.R
@@ -398,7 +414,9 @@ def _tight(quick):
     return out
 
 
-@case("long horizon (batched advance)", "N elastic pennies on the paper's ellipse advanced with penny_env.physics.advance_pennies (intervals of 0.25 s) until N x K impacts in total (1000 x 1000 = 1e6; --quick: 100 x 100): energy drift, penetration, impacts per second")
+@case("long horizon (batched advance)",
+      "N elastic pennies on the paper's ellipse advanced with penny_env.physics.advance_pennies (intervals of 0.25 s) "
+      "until N x K impacts in total (1000 x 1000 = 1e6; --quick: 100 x 100): energy drift, penetration, impacts per second")
 def _long(quick):
     N, K = (1000, 1000) if not quick else (100, 100)
     params = PennyParams()
@@ -440,7 +458,9 @@ def _long(quick):
     return [dict(measured=m, passed=ok, reasons=why, repro=repro, label=f"{N} pennies, {N * K:.0e} impacts in total")]
 
 
-@case("controlled flow near the cancellation points", "penny_env.physics.flow and simulate(table=None) vs the reference flow_cases.json (u1 -> 0, phi_dot -> 0, fast spin, long times)")
+@case("controlled flow near the cancellation points",
+      "penny_env.physics.flow and simulate(table=None) vs the reference flow_cases.json (u1 -> 0, phi_dot -> 0, "
+      "fast spin, long times)")
 def _flows(quick):
     from .reference import flow_cases
     out = []
@@ -465,7 +485,8 @@ def _flows(quick):
         m = {"cases": len(rows), "worst position err / path scale": rel, "worst abs position err [m]": max(r[3] for r in rows),
              "worst angle/velocity rel err": max(r[1] for r in rows), "worst case": tag}
         ok = rel <= 1e-12 and max(r[1] for r in rows) <= 1e-13
-        out.append(dict(measured=m, passed=ok, reasons=[] if ok else [f"flow error {rel:.3g} (relative to the path scale) in {tag}"],
+        out.append(dict(measured=m, passed=ok,
+                        reasons=[] if ok else [f"flow error {rel:.3g} (relative to the path scale) in {tag}"],
                         repro=f"compare penny_env.physics.flow with flow_cases.json case {tag!r}", label=f"family {fam}"))
     return out
 

@@ -151,7 +151,8 @@ def plot(scs, results, path_imp, path_state):
 
 def report(scs, results, argv, png_names) -> list[str]:
     L = common.header("Work-precision of penny_env and baseline integrators", "penny_env.analysis.work_precision", argv)
-    L += ["Errors are against the 50-digit mpmath reference (penny_env/analysis/reference_data). Impact-time error: max |t - t_ref| "
+    L += ["Errors are against the 50-digit mpmath reference (penny_env/analysis/reference_data). "
+          "Impact-time error: max |t - t_ref| "
           "over the impacts matched by time and end (order-preserving alignment, penny_env.analysis.matching); "
           "missed / spurious impacts are counted separately (a method that misses a grazing impact and loses the "
           "trajectory shows a small error on the few impacts it still matches but many missed ones). "

@@ -71,8 +71,9 @@ def disk_cache_available() -> bool:
         except RuntimeError:
             ok = False
             import logging
-            logging.getLogger("penny_env").warning("penny_env: numba finds no writable cache directory (set NUMBA_CACHE_DIR to one): "
-                           "the compiled env step and physics compile in every process")
+            logging.getLogger("penny_env").warning("penny_env: numba finds no writable cache directory "
+                                                   "(set NUMBA_CACHE_DIR to one): "
+                                                   "the compiled env step and physics compile in every process")
         _CACHE_AVAILABLE.append(ok)
     return _CACHE_AVAILABLE[0]
 

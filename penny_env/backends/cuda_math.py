@@ -5,8 +5,6 @@ Imported only where numba-cuda is installed."""
 import math
 import types
 
-import numpy as np
-
 _NAMESPACE = []
 
 

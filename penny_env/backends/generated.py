@@ -34,8 +34,9 @@ def generated_dir() -> Path:
     if not _DIR:
         env = os.environ.get("PENNY_ENV_GENERATED_DIR")
         cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        uid = os.getuid() if hasattr(os, "getuid") else 0
         candidates = ([Path(env)] if env else []) + [Path(__file__).with_name("_generated"), cache / "penny_env" / "generated",
-                                                     Path(tempfile.gettempdir()) / f"penny_env_generated_{os.getuid() if hasattr(os, 'getuid') else 0}"]
+                                                     Path(tempfile.gettempdir()) / f"penny_env_generated_{uid}"]
         for folder in candidates:
             if _writable(folder):
                 _DIR.append(folder)

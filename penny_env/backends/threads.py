@@ -97,9 +97,9 @@ def serial_now() -> bool:
 
 def locked(f, serial=None, count=None):
     """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads);
-    count(args) gives the pennies of a call (default: the first argument's last axis). ``serial()`` (the same function compiled without
-    ``parallel``, built on first use) runs instead in a child forked after numba's threads were launched, and for fewer than
-    :data:`SERIAL_BELOW` pennies, where waking the sleeping threads costs more than the work they share."""
+    count(args) gives the pennies of a call (default: the first argument's last axis). ``serial()`` (the same function
+    compiled without ``parallel``, built on first use) runs instead in a child forked after numba's threads were launched,
+    and for fewer than :data:`SERIAL_BELOW` pennies, where waking the sleeping threads costs more than the work they share."""
     built = []
     count = count or (lambda args: args[0].shape[-1])
 

@@ -12,8 +12,6 @@ every override key must be a field of one of them (nested dict fields such as ``
 """
 from __future__ import annotations
 
-import math
-import numbers
 import os
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -25,7 +23,7 @@ from ..physics.tables import TABLE_KINDS, Table
 from ..physics.tables.base import LENGTH_RANGE
 from ..physics.validation import check_actuation, check_table, step_speed_limits
 from .config import ConfigError, ConfigTypeError, UnknownFieldError, number
-from .tasks import TASKS, Task, all_config_fields, config_fields, task_record
+from .tasks import TASKS, Task, config_fields, task_record
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 

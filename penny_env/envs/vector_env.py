@@ -227,7 +227,8 @@ class PennyVectorEnv(VectorEnv):
         from ..backends.builder import cuda_available
         if self.backend == "cuda" or (self.backend == "auto" and (self.device is not None or self.outputs == "torch")):
             if importlib.util.find_spec("numba_cuda") is None:
-                raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, pip install -e \".[cuda]\" (docs/gpu.md)")
+                raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, "
+                                 "pip install -e \".[cuda]\" (docs/gpu.md)")
             if not cuda_available():
                 raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
             return True

@@ -41,8 +41,8 @@ from .flows import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_C
 from .law_checks import ENERGY_RTOL
 from .laws import COMPILED_LAWS, law_index
 from .tables.base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind
-from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step, displacement_closed,
-                      end_point, law_update, local_curvature, motion_bounds, newton_polish, search_step,
+from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step,
+                      displacement_closed, end_point, local_curvature, motion_bounds, newton_polish, search_step,
                       time_resolution)
 
 
@@ -192,7 +192,8 @@ def scalar_model(params, table, law, settings) -> Model:
         G, L, delta = float(table.grad_bound), float(table.hessian_bound), settings.contact_tol * table.size
         outside = max(OUTSIDE_TOL * table.size, 64.0 * delta)
     return Model(params.R, params.m, params.rolling_inertia, params.J, G, L, bool(third), D3, jump, delta, outside,
-                 float(law.e), law_index(law.update), law.conserves_energy, int(settings.max_search_steps), int(settings.zeno_impacts),
+                 float(law.e), law_index(law.update), law.conserves_energy, int(settings.max_search_steps),
+                 int(settings.zeno_impacts),
                  float(settings.zeno_window), int(settings.max_events_per_interval), kind, other, *consts)
 
 

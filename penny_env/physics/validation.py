@@ -192,7 +192,8 @@ def check_table(table, params: PennyParams):
         return None
     check_registered(table)
     if not table.inradius > params.R:
-        raise ValueError(f"table: too small for the penny, its inradius {table.inradius:.6g} m is not larger than R = {params.R:.6g} m")
+        raise ValueError(f"table: too small for the penny, its inradius {table.inradius:.6g} m "
+                         f"is not larger than R = {params.R:.6g} m")
     if table.inradius < params.R * (1.0 + MIN_GAP):
         # impacts of the two ends would follow each other within the search's time resolution
         raise ValueError(f"table: too small for the penny, its inradius {table.inradius!r} m exceeds R = {params.R!r} m "

@@ -1367,7 +1367,8 @@ def build_D(do_checks, log):
             # e = 1 equal to elastic asserted in apply_law; e = 0.3 energy must not increase
             assert energy(post_e3, P) <= energy(st, P) * (1 + mpf("1e-45"))
             assert energy(post_pl, P) <= energy(st, P) * (1 + mpf("1e-45"))
-        nv = lambda s_: h_and_hdot(s_, sigma, table, P)[1]
+        def nv(s_):
+            return h_and_hdot(s_, sigma, table, P)[1]
         d = {
             "case": k,
             "params": P.json(),

@@ -47,7 +47,8 @@ def case_defs():
     return [
         ("ellipse-elastic", ell, "elastic", 1.0, (f(0.01), f(-0.02), f(0.3), f(1.1), f(40.0), f(0.5)), None, None, f(0.6)),
         ("ellipse-plastic", ell, "plastic", 0.0, (f(-0.03), f(0.04), f(0.0), f(2.5), f(35.0), f(-1.5)), None, None, f(0.5)),
-        ("circle-restitution", circ, "restitution", 0.6, (f(0.05), f(0.0), f(1.0), f(-0.7), f(-45.0), f(2.0)), None, None, f(0.7)),
+        ("circle-restitution", circ, "restitution", 0.6, (f(0.05), f(0.0), f(1.0), f(-0.7), f(-45.0), f(2.0)),
+         None, None, f(0.7)),
         ("stadium-elastic", stad, "elastic", 1.0, (f(0.01), f(-0.02), f(0.3), f(1.1), f(40.0), f(0.5)), None, None, f(0.4)),
         ("stadium-plastic-back", stad, "plastic", 0.0, (f(0.1), f(0.03), f(0.0), f(0.4), f(-38.0), f(1.0)), None, None, f(0.8)),
         ("ellipse-controlled-elastic", ell, "elastic", 1.0, (f(0.0), f(0.05), f(0.0), f(0.9), f(30.0), f(0.0)),

@@ -2,7 +2,10 @@
 module per shape. See docs/extending.md to add one."""
 from __future__ import annotations
 
-from .base import COMPILED_FORMULAS, N_CONSTANTS, TABLE_KINDS, Table, compiled_kind, register_table
+from .base import TABLE_KINDS, Table, register_table
+# not in __all__, still imported from here: the compiled builds' formulas and dispatch (backends/physics.py,
+# backends/choice.py, the tests) and N_CONSTANTS (how many constants a compiled formula receives)
+from .base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind  # noqa: F401
 from .convex import PROTOCOL, ConvexTable, ProtocolTable, check_on_grid
 from .ellipse import Circle, Ellipse
 from .stadium import Stadium

@@ -97,7 +97,8 @@ def _compare_row(owner, label, got, want, name, scale, X, Y) -> None:
         return
     i = np.unravel_index(np.argmax(np.where(np.isfinite(err), err, np.inf)), err.shape)
     raise ValueError(f"{owner}: the compiled formula {label} gives {name} = {got[i]:.9g} where the table's own method "
-                     f"gives {want[i]:.9g} at (x, y) = ({X[i]:.6g}, {Y[i]:.6g}); the event loop runs the formula, so it must equal the methods "
+                     f"gives {want[i]:.9g} at (x, y) = ({X[i]:.6g}, {Y[i]:.6g}); "
+                     "the event loop runs the formula, so it must equal the methods "
                      "(the table's h, grad, hessian), which the checks and the renderer use")
 
 
