@@ -32,7 +32,8 @@ class EnvEntryPoints(NamedTuple):
     """The compiled env step of one (target, table kind, task). Single env: ``env_step``, ``initial_state``,
     ``observe_state``; vector env: ``step_envs``, ``reset_rows``, ``observe_rows`` (CPU and python: plain
     callables; CUDA: builder.CudaLoop kernels), and on CUDA ``clear_work_count``, ``fast_step_envs`` and
-    ``rare_step_envs``, the step in two kernels after the list's reset (module comment there). ``unpack``: the plain unpacker of the constants."""
+    ``rare_step_envs``, the step in two kernels after the list's reset (module comment there). ``unpack``: the
+    plain unpacker of the constants."""
 
     target: str
     env_step: Callable
