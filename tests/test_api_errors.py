@@ -8,6 +8,7 @@ import penny_env as pe
 import penny_env.batch as pb
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("field", ["R", "m", "I", "J"])
 @pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf])
 def test_params_reject_non_positive_or_non_finite(field, value):
@@ -15,16 +16,19 @@ def test_params_reject_non_positive_or_non_finite(field, value):
         pe.PennyParams(**{field: value})
 
 
+@pytest.mark.fast
 def test_params_reject_strings():
     with pytest.raises(TypeError, match="R"):
         pe.PennyParams(R="big")
 
 
+@pytest.mark.fast
 def test_paper_defaults():
     p = pe.PennyParams()
     assert (p.R, p.m, p.I, p.J) == (0.01, 0.0025, 1.25e-7, 6.25e-8)
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("make, field", [
     (lambda: pe.Ellipse(-1.0, 0.2), "a"), (lambda: pe.Ellipse(0.2, math.nan), "b"),
     (lambda: pe.Circle(0.0), "radius"), (lambda: pe.Stadium(0.0, 0.1), "radius"),
@@ -59,6 +63,7 @@ def test_state_of_wrong_type():
         pe.simulate(["a", 0, 0, 0, 0, 0], table=pe.Circle(0.2), t_final=1.0)
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("law, exc", [("bouncy", ValueError), (1.5, ValueError), (-0.1, ValueError),
                                       (math.nan, ValueError), (None, TypeError), (True, TypeError)])
 def test_bad_law(law, exc, paper_state):

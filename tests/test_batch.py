@@ -46,6 +46,7 @@ def test_flow_first_impact_impact_map():
     assert np.allclose(ke(post), ke(pre), rtol=1e-12)
 
 
+@pytest.mark.fast
 def test_errors_name_field_and_row():
     bad = STATES.copy()
     bad[1, 3] = np.nan

@@ -17,6 +17,7 @@ from penny_env.envs.registration import env_presets
 IDS = env_ids()
 
 
+@pytest.mark.fast
 def test_ids_cover_tasks_scenes_laws_actuations():
     # the study's probe ids (PennyProbe*, tests/test_study_probes.py) are a grid apart
     assert 8 <= len([i for i in IDS if not i.startswith("PennyProbe")]) <= 12
@@ -195,6 +196,7 @@ def test_bad_input_errors_and_recovery():
     env2.step(np.zeros(2, np.float32))  # usable again
 
 
+@pytest.mark.fast
 def test_config_errors_name_the_field(tmp_path):
     with pytest.raises(ConfigError, match="control_dt"):
         PennyEnv(control_dt=-1.0)
@@ -285,6 +287,7 @@ def test_options_state_validated():
     env.reset(seed=0)
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("kwargs,field", [
     ({"tolerance": "0.5"}, "task.tolerance"), ({"max_episode_steps": 10.5}, "task.max_episode_steps"),
     ({"kind": 3}, "task.kind"), ({"actuation": ["both"]}, "scene.actuation"), ({"params": [1, 2]}, "scene.params"),

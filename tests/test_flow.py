@@ -41,6 +41,7 @@ CASES = [
 ]
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("s, acc1, acc2, t", CASES)
 def test_flow_matches_mpmath(s, acc1, acc2, t):
     out = flow(np.array(s, float)[:, None], acc1, acc2, t, R)[:, 0]

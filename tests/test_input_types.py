@@ -59,6 +59,7 @@ def _name(field):
     return field.split(".")[-1].split(" ")[-1]
 
 
+@pytest.mark.fast
 @hyp_settings(max_examples=300, deadline=None)
 @given(field=st.sampled_from(SCALAR_FIELDS), value=WRONG_TYPES)
 def test_scalar_fields_refuse_wrong_types(field, value):
@@ -68,6 +69,7 @@ def test_scalar_fields_refuse_wrong_types(field, value):
         _call_scalar(field, value)
 
 
+@pytest.mark.fast
 @hyp_settings(max_examples=200, deadline=None)
 @given(field=st.sampled_from(SCALAR_FIELDS), value=BAD_VALUES)
 def test_scalar_fields_refuse_bad_values(field, value):

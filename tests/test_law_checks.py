@@ -79,6 +79,7 @@ def test_a_law_returning_nan_is_refused():
         pe.register_law("nanlaw", lambda W, w, a, b, g2, e, I, J, m: (W * math.nan, w))
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("e, error, match", [(math.nan, ValueError, "e must be finite"),
                                              ("0.5", TypeError, "e must be a real number, got str"),
                                              (True, TypeError, "e must be a real number, got bool"),
@@ -122,6 +123,7 @@ def test_a_false_conserves_energy_claim_is_refused(registry):
     registry("elastic_too", restitution_like(2.0), conserves_energy=True)  # (elastic: within ENERGY_RTOL)
 
 
+@pytest.mark.fast
 def test_the_built_in_names_cannot_be_replaced():
     # a user's "elastic" would have changed every environment id that runs the elastic law
     for name in ("elastic", "plastic", "restitution", "Elastic"):

@@ -124,6 +124,7 @@ def test_energy_and_normal_velocity(p, seed, end, law):
         assert abs(normal(post[4], post[5]) + law * normal(s[4], s[5])) <= 1e-12 * (abs(normal(s[4], s[5])) + 1e-300)
 
 
+@pytest.mark.fast
 def test_elastic_map_is_an_involution():
     rng = np.random.default_rng(0)
     p, table = pe.PennyParams(), pe.Ellipse(0.15, 0.2)
@@ -132,6 +133,7 @@ def test_elastic_map_is_an_involution():
     np.testing.assert_allclose(twice, s, rtol=1e-13)
 
 
+@pytest.mark.fast
 def test_sticking_when_rolling_inertia_exceeds_m_r2():
     # head-on impact, I = 3 m R^2: pi_Delta o P leaves the end moving outward; we stop it at the wall
     p = pe.PennyParams(I=3 * 0.0025 * 0.01**2)

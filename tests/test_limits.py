@@ -16,6 +16,7 @@ from penny_env.physics import SolverSettings
 BIG = 2 ** 63
 
 
+@pytest.mark.fast
 def test_max_episode_steps_beyond_int64_names_the_field():
     # repro_steps_overflow: passed the check, then "OverflowError: Python int too large to convert to C long"
     with pytest.raises(ConfigError, match=r"task\.max_episode_steps must be <= 2\*\*63 - 1"):
@@ -29,6 +30,7 @@ def test_max_episode_steps_beyond_int64_names_the_field():
     env.step(np.zeros(2, np.float32))
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("n", [10 ** 19, BIG])
 def test_num_envs_beyond_int64_names_the_field(n):
     # num_envs = 1e19 gave an OverflowError
@@ -110,6 +112,7 @@ def test_a_torque_limit_that_leaves_too_little_room_blames_the_torque_unless_ini
         resolve("circle", "reach", actuation="drive", control_dt=1.0, torque_limits={"u2": 0.0375})
 
 
+@pytest.mark.fast
 def test_yaml_1e_minus_2_reads_as_a_float(tmp_path):
     # PyYAML (YAML 1.1) reads 1e-2 as the string '1e-2': "scene.control_dt must be a number, got '1e-2'"
     path = tmp_path / "scene.yaml"
@@ -121,6 +124,7 @@ def test_yaml_1e_minus_2_reads_as_a_float(tmp_path):
                                                                           "e": 1000}
 
 
+@pytest.mark.fast
 def test_a_number_given_as_a_string_says_so():
     with pytest.raises(ConfigError, match=r"scene\.control_dt must be a number, got '1e-2' \(a string: write the number "
                                           r"unquoted"):

@@ -51,6 +51,7 @@ def test_quick_run_writes_its_files(tmp_path, capsys):
     assert torch.equal(loaded.act(x), agent.act(x).cpu())
 
 
+@pytest.mark.fast
 @pytest.mark.parametrize("argv, field", [
     (["--num-envs", "0"], "num_envs"),
     (["--num-envs", "-3"], "num_envs"),
@@ -66,6 +67,7 @@ def test_bad_input_is_refused_naming_the_field(argv, field, capsys):
     assert field in capsys.readouterr().err
 
 
+@pytest.mark.fast
 def test_check_args_errors_name_the_field():
     with pytest.raises(ValueError, match="num_envs"):
         ppo_torch.check_args(Args(num_envs=0))
@@ -83,6 +85,7 @@ def test_quick_never_writes_into_the_working_directory(reports_untouched):
     assert not (reports_untouched / "runs").exists()
 
 
+@pytest.mark.fast
 def test_config_maps_sb3_hyperparameters():
     from training.train import load_config
     args = ppo_torch.args_from_config(load_config(ppo_torch.ROOT / "configs/train/ppo_reach_ellipse.yaml"))
@@ -124,6 +127,7 @@ def test_actions_go_back_in_the_envs_array_type():
 
 
 # -- advantages with NEXT_STEP autoreset --------------------------------------------------------
+@pytest.mark.fast
 def test_gae_masks_the_reset_step_and_bootstraps_truncation_on_the_last_obs():
     g, lam = 0.9, 0.8
     # one env, 5 steps: 0 ordinary, 1 truncated (returns its last obs), 2 the reset step (masked), 3

@@ -35,6 +35,7 @@ def test_docs_envs_lists_every_registered_id():
     assert listed - registered == set(), sorted(listed - registered)
 
 
+@pytest.mark.fast
 def test_every_round_table_calls_its_radius_radius():
     for table in (pe.Circle(0.2), pe.Circle(radius=0.2), pe.Stadium(radius=0.2, length=0.1),
                   pe.RoundedRectangle(0.5, 0.4, radius=0.2)):
@@ -43,6 +44,7 @@ def test_every_round_table_calls_its_radius_radius():
     assert pe.batch.make_table({"kind": "circle", "radius": 0.2}) == pe.Circle(0.2)
 
 
+@pytest.mark.fast
 def test_circle_r_is_a_deprecated_alias():
     with pytest.warns(DeprecationWarning, match=r"Circle\(radius=\.\.\.\)"):
         old = pe.Circle(r=0.2)

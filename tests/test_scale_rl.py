@@ -32,6 +32,7 @@ def test_quick_run_trains_its_budget_and_reports_every_cell(tmp_path):
             assert r["lo"] == 0.0 and r["hi"] > 0.3  # honest at 0: 0 of 4 does not exclude rates near 1/2
 
 
+@pytest.mark.fast
 def test_seed_clustered_interval_with_several_seeds():
     rows = [{"probe": "Steer", "table": "stadium", "law": "elastic", "seed": s, "global_step": 100, "successes": k,
              "episodes": 10} for s, k in ((0, 10), (1, 0))]
@@ -39,6 +40,7 @@ def test_seed_clustered_interval_with_several_seeds():
     assert r["rate"] == 0.5 and r["seed_successes"] == "10 0" and r["lo"] < 0.2 and r["hi"] > 0.8
 
 
+@pytest.mark.fast
 def test_bad_cells_and_quick_reports_into_docs_are_refused(capsys):
     with pytest.raises(SystemExit):
         scale_rl.parse(["--quick", "--cells", "Steer:stadium"])

@@ -1,4 +1,5 @@
 """Scene defaults are written once (penny_env/envs/scene.py); the YAML presets give only what differs."""
+import pytest
 import yaml
 
 from penny_env.envs.scene import CONFIG_DIR, Scene, resolve
@@ -15,6 +16,7 @@ def _repeated(preset: dict, defaults: dict, where: str) -> list[str]:
     return out
 
 
+@pytest.mark.fast
 def test_scene_presets_do_not_repeat_the_defaults():
     defaults = {name: value for name, value in vars(Scene()).items()}
     for path in sorted((CONFIG_DIR / "scenes").glob("*.yaml")):
@@ -23,6 +25,7 @@ def test_scene_presets_do_not_repeat_the_defaults():
         assert not _repeated(preset, defaults, path.stem), f"{path.name} repeats a default of scene.py"
 
 
+@pytest.mark.fast
 def test_the_paper_ellipse_preset_is_the_default_scene():
     scene, _ = resolve("ellipse", "reach")
     assert scene == Scene()

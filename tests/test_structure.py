@@ -4,17 +4,21 @@ import importlib
 import importlib.util
 import inspect
 
+import pytest
+
 import penny_env
 import penny_env.batch
 import penny_env.physics as physics
 
 
+@pytest.mark.fast
 def test_the_array_event_loop_is_gone():
     for name in ("events", "advance", "flow", "simulate", "tables.convex"):
         spec = importlib.util.find_spec(f"penny_env.physics.{name}")
         assert (spec is None) == (name != "tables.convex"), name
 
 
+@pytest.mark.fast
 def test_no_exported_function_shadows_its_submodule():
     for package in (penny_env, physics):
         for name in package.__all__:
@@ -23,6 +27,7 @@ def test_no_exported_function_shadows_its_submodule():
                 assert importlib.util.find_spec(f"{package.__name__}.{name}") is None, f"{package.__name__}.{name}"
 
 
+@pytest.mark.fast
 def test_one_public_advance():
     from penny_env.backends import batch as compiled
     from penny_env.physics import pennies, scalar

@@ -79,6 +79,7 @@ class _K(NamedTuple):
     x: float
 
 
+@pytest.mark.fast
 def test_a_task_is_checked_when_it_is_registered():
     @dataclass(frozen=True)
     class Cfg(Task):
@@ -100,6 +101,7 @@ def test_a_task_is_checked_when_it_is_registered():
     assert "t1" not in TASKS
 
 
+@pytest.mark.fast
 def test_a_task_field_of_another_kind_is_refused_naming_it():
     from penny_env.envs.config import UnknownFieldError
     with pytest.raises(UnknownFieldError, match="impacts_goal"):
@@ -108,6 +110,7 @@ def test_a_task_field_of_another_kind_is_refused_naming_it():
         PennyEnv("ellipse", {"kind": "sprint"})
 
 
+@pytest.mark.fast
 def test_draws_equal_the_numpy_implementation_they_replaced():
     """The per-env reset stage (functional.initial_state and the tasks' target stages) draws, on every
     registered id, the very bits penny_env's vectorised numpy sampler drew (tests/reference/numpy_draws.py)."""

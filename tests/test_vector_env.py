@@ -140,6 +140,7 @@ def test_returned_observations_are_the_callers(mode):
     assert np.array_equal(venv.step(a)[0], twin.step(a)[0])
 
 
+@pytest.mark.fast
 def test_bad_actions_name_the_sub_env_and_keep_states():
     venv = PennyVectorEnv(4, "stadium", "impacts")
     with pytest.raises(gym.error.ResetNeeded):

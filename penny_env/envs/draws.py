@@ -49,6 +49,9 @@ def _mix_array(z):
 
 def seed_keys(seeds) -> np.ndarray:
     """uint64 keys from integer seeds in [0, 2**64) (envs.core.check_seed checks them)."""
-    arr = np.array([int(s) % (1 << 64) for s in np.atleast_1d(seeds)], dtype=np.uint64)
+    # the seeds as Python ints: numpy would turn a list holding 2**64 - 1 into float64 (2**64, the key of 0)
+    items = seeds.tolist() if isinstance(seeds, np.ndarray) else list(seeds) if isinstance(seeds, (list, tuple, range)) \
+        else [seeds]
+    arr = np.array([int(s) % (1 << 64) for s in np.ravel(np.array(items, dtype=object))], dtype=np.uint64)
     with np.errstate(over="ignore"):
         return _mix_array(arr + np.uint64(GOLDEN))
