@@ -1,13 +1,16 @@
 """Every CUDA kernel of the package, compiled to PTX without a GPU, and its registers from ptxas.
 
-``python -m devtools.cuda_kernels [--cc 9.0 8.0] [--kinds ...] [--ptxas PATH] [--out docs/gpu_registers.md]``
+``python -m devtools.cuda_kernels [--cc 9.0 8.0] [--kinds ...] [--ptxas PATH] [--max-registers 80] [--out FILE]``
 compiles, for every registered table kind and the open plane, the kernels of the GPU backend
 (backends/builder.py, target "cuda"): the vector env's step (with its autoreset), reset and observation
 kernels (backends/env.py), and the batch's event loop and first-impact search (backends/physics.py); the law
 dispatch inside them covers every registered law. With ptxas (the CUDA toolkit's PTX assembler, found on PATH,
 in $CUDA_HOME/bin or /usr/local/cuda*/bin) it reports each kernel's registers per thread, stack frame and
 spills, and the theoretical occupancy they allow (CUDA's occupancy rules for the compute capability, 128
-threads per block as the backend launches), and writes that table (``--out``).
+threads per block as the backend launches), and writes that table (``--out``). The backend caps the fast step
+kernel at backends/env.FAST_MAX_REGISTERS registers: ``--max-registers`` with that value reports the kernel as
+built (docs/cuda_kernels.md: ``--cc 9.0 --max-registers 80 --out docs/cuda_kernels.md``); without it the fast
+kernel is reported uncapped.
 
 numba-cuda looks up the current device's compute capability when it compiles device functions; on a machine
 without a driver the command answers that look-up with a stand-in of the compute capability asked for. Each

@@ -21,7 +21,7 @@ def test_quick_run_trains_its_budget_and_reports_every_cell(tmp_path):
     for r in rows:
         assert 0 <= int(r["successes"]) <= int(r["episodes"]) == 4
     text = out.read_text()
-    assert "2 of 2 cells done" in text and "- sources: sha256" in text and "- device: cpu" in text
+    assert "2 of 2 cells done" in text and "- command: `" in text and "- device: cpu" in text
     for c in scale_rl.QUICK_CELLS:
         assert " ".join(c.split(":")) in text
     # every row's interval contains its rate and stays in [0, 1] (exact Clopper-Pearson with one seed)

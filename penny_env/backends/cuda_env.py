@@ -6,8 +6,9 @@ a step touches lives on the device in buffers allocated once: the envs' state (f
 each env's seed key, episode counter and pending-reset flag: resets are drawn on the device, by the same
 counter-based draws as on the CPU), the actions, and two sets of outputs (functional.StepResults and the
 impact buffers) that the steps use in turn. A warm step is: the actions copied into their buffer (on the
-device when they are a device tensor), one kernel launch with its arguments marshalled once
-(builder.PreparedLaunch), on the current torch stream; no allocation, no copy to the host, no
+device when they are a device tensor), three kernel launches with their arguments marshalled once
+(builder.PreparedLaunch; backends/env.py: the rare list's counter cleared, the fast kernel, the rare kernel), on
+the current torch stream; no allocation, no copy to the host, no
 synchronization. So a step can be captured in a CUDA graph (:class:`CudaGraphStep`).
 
 Outputs (``outputs``): "torch" (device tensors on the buffers, zero-copy), "device" (numba device arrays:

@@ -43,7 +43,8 @@ class PennyVectorEnv(VectorEnv):
     The step is PennyEnv's own step function (functional.env_step) in a loop over the envs, autoreset
     included (functional.step_env, written once for every backend): with the numba backend one compiled
     call, parallel over the envs (numba ``prange``); with backend="python" the same functions uncompiled
-    (slow; for debugging); with backend="cuda" one kernel launch, the state resident on the GPU. States
+    (slow; for debugging); with backend="cuda" three kernel launches prepared once (docs/gpu.md), the state
+    resident on the GPU. States
     live in one (6, num_envs) float64 array.
 
     Equivalence: sub-env i seeded with seed + i follows the trajectory of PennyEnv seeded with
@@ -80,7 +81,8 @@ class PennyVectorEnv(VectorEnv):
     ``is_success``        every step: the task's success condition (True only where it terminated)
     ``limit``             (num_envs,) int8: 0, or the documented limit that truncated the env's
                           episode (1 "speed", 2 "impacts", 3 "law_nonfinite", 4 "law_energy",
-                          5 "outside_wall"; PennyEnv's table)
+                          5 "outside_wall"; PennyEnv's table; 6 "action": a non-finite action
+                          on the CUDA backend with torch outputs, below)
     ====================  =========================================================================
 
     **GPU** (``backend="cuda"``, ``device`` a CUDA device index, ``outputs`` "torch" or "numpy"): the
@@ -91,7 +93,7 @@ class PennyVectorEnv(VectorEnv):
     other step: a step's outputs stay valid until the step after the next (keep them longer with
     ``.clone()``). SAME_STEP's ``final_obs`` is a device tensor masked by ``_final_obs``. A non-finite
     action does not raise there (that would need a round trip to the host): the env is not stepped and its
-    episode ends, truncated, with ``info["limit"]`` 3 "action". outputs="numpy" copies the outputs to the
+    episode ends, truncated, with ``info["limit"]`` 6 "action". outputs="numpy" copies the outputs to the
     host (and raises on non-finite actions as the CPU does). ``backend="auto"`` takes CUDA where numba-cuda
     finds a GPU, with numpy outputs unless outputs="torch" is asked. docs/gpu.md.
 
