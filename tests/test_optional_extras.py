@@ -3,6 +3,7 @@ interpreter; the full check is a venv with only the core: numpy gymnasium pyyaml
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 REPO = Path(__file__).parent.parent
@@ -31,10 +32,21 @@ def test_tests_skip_with_their_reason_without_the_extras(tmp_path):
                  "tests/test_analysis.py::test_integrators_find_first_impacts_of_paper_elastic_circle",
                  "tests/test_readme.py::test_ppo_snippet_runs", "tests/test_dynamics.py::test_dynamics_report_quick"]
     env = dict(os.environ, PYTEST_DISABLE_PLUGIN_AUTOLOAD="1", PYTHONPATH=str(REPO))
-    run = subprocess.run([sys.executable, "-c", RUNNER, ",".join(EXTRAS), *selection], cwd=REPO, env=env,
-                         capture_output=True, text=True, timeout=300)
+
+    def run_selection():
+        return subprocess.run([sys.executable, "-X", "faulthandler", "-c", RUNNER, ",".join(EXTRAS), *selection],
+                              cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    run = run_selection()
+    if run.returncode < 0:
+        # killed by a signal: seen once in CI (SIGSEGV, -11) and never here; once more, with where it crashed kept
+        # for the report (faulthandler's "Fatal Python error" section names the test and the line)
+        first = run.stdout + run.stderr
+        crash = first[first.find("Fatal Python error"):][:4000] if "Fatal Python error" in first else first[-4000:]
+        warnings.warn(f"the selection died with signal {-run.returncode} and was run again; where:\n{crash}")
+        run = run_selection()
     out = run.stdout + run.stderr
-    assert run.returncode == 0, out[-3000:]
+    crash = out[out.find("Fatal Python error"):][:4000] if "Fatal Python error" in out else ""
+    assert run.returncode == 0, crash + out[-3000:]
     assert " passed" in out and " failed" not in out and " error" not in out
     for reason in ("hypothesis is not installed", "mpmath", "pygame-ce", "moviepy", "stable_baselines3",
                    "scipy (the penny-env[bench] extra)", "Stable-Baselines3", "matplotlib"):
