@@ -107,9 +107,11 @@ def announce_compile(entry: str, shape: str, kind: int, dispatcher) -> None:
         return
     import logging
     verb = "compiling" if fresh else "compiling (or loading from numba's cache)"
+    # (docs/compile_time.md, 2 cores: the vector env step 22-28 s, the single env and the batch API 4-11 s)
+    cost = "about 30 s" if "vector" in entry else "about 10 s"
     logging.getLogger("penny_env").warning(
         f"penny_env: {verb} the {entry} for table {shape}: the first use of a table shape after installing takes "
-        "about 10 s (up to a minute on a slow or busy machine); numba caches the machine code, later runs load it "
+        f"{cost} (minutes on a slow or busy machine); numba caches the machine code, later runs load it "
         "in about a second")
 
 
