@@ -258,12 +258,12 @@ class PennyVectorEnv(VectorEnv):
             final = (n if self.autoreset_mode == AutoresetMode.SAME_STEP else 0, c.obs_dim)
             self._arc_scratch = (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8), np.empty(n, dtype=bool),
                                  np.empty((0, 6, n)), np.empty((0, n), dtype=np.int8), np.empty(final, dtype=np.float32),
-                                 np.full(n, K, dtype=np.int64))
-        arc, fault, done, post, rest, final, full = self._arc_scratch
+                                 np.full(n, K, dtype=np.int64), np.empty(n, dtype=np.int64))
+        arc, fault, done, post, rest, final, full, arc_total = self._arc_scratch
         # new arrays each step for what the step returns, so that the caller may keep them
         out = (np.empty((n, c.obs_dim), dtype=np.float32), np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool),
                np.empty(n), np.empty(n, dtype=np.int8), np.empty(n), np.empty(n),
-               np.empty(n, dtype=np.int64) if c.counts_arc else arc, final, done)
+               np.empty(n, dtype=np.int64) if c.counts_arc else arc_total, final, done)  # (arc_total: not buf's arc)
         times, ends = np.empty((n, K)), np.empty((n, K), dtype=np.int8)
         buf = (full.copy(), times.T, ends.T, post, rest, arc, fault)  # (a copy: np.full costs 0.7 us, a copy 0.1)
         return out, buf, times, ends
