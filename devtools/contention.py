@@ -115,7 +115,7 @@ def measure(setups, n: int, steps: int, repeats: int) -> list[dict]:
 
 
 def report(rows, n: int, steps: int, repeats: int, command: str, load_before: float) -> str:
-    from penny_env.analysis.provenance import stamp_line
+    from studies.provenance import stamp_line
     when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     ref = next((r for r in rows if r["setup"] == "penny_env default"), None)
     lines = ["# Vector env beside a busy process", "",

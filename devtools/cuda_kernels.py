@@ -38,7 +38,7 @@ def example_arguments(n: int = 4, K: int = 2, task="impacts"):
     constants' types do not depend on the table: the kernels are specialised by their build's kind)."""
     from penny_env.backends.packing import pack
     from penny_env.envs.core import Core
-    from penny_env.envs.functional import EnvState, StepResults, env_params
+    from penny_env.step.functional import EnvState, StepResults, env_params
     from penny_env.envs.scene import resolve
     from penny_env.physics.scalar import ImpactBuffers, impact_buffers, scalar_model
     scene, tk = resolve("ellipse", task)

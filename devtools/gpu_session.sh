@@ -2,12 +2,12 @@
 # One lent GPU session in one call of the device tool (docs/gpu.md, "Measuring on a lent GPU"): install what the
 # image lacks (the wheels carried in .whl: gymnasium and its farama-notifications), then, each part under its own
 # time limit and each run even where one before it failed:
-#   1. the gpu tests (tests/test_cuda.py -m gpu);
-#   2. tests/cuda_sim_check.py on the real GPU (the CUDA backend against the CPU, step by step; it stops at the
+#   1. the gpu tests (tests/backends/test_cuda.py -m gpu);
+#   2. tests/backends/cuda_sim_check.py on the real GPU (the CUDA backend against the CPU, step by step; it stops at the
 #      first difference and says where);
 #   3. devtools.throughput_gpu --variants -> docs/throughput_gpu.md;
-#   4. training.ppo_torch with configs/train/ppo_torch_gpu.yaml -> docs/ppo_torch_gpu.md;
-#   5. training.scale_rl (the arguments after the script's name) -> docs/scale_rl.md (+ .csv, .png), rewritten
+#   4. studies.ppo_torch_report (training.ppo_torch) with configs/train/ppo_torch_gpu.yaml -> docs/ppo_torch_gpu.md;
+#   5. studies.scale_rl (the arguments after the script's name) -> docs/scale_rl.md (+ .csv, .png), rewritten
 #      after each run so that a time limit keeps the cells done.
 # The reports are written where they are committed, then copied with one log to $OUT (8 files at most come back).
 #   usage: bash devtools/gpu_session.sh [scale_rl arguments...]
@@ -22,9 +22,9 @@ python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upg
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1 | tee -a "$LOG"
 python3 -c "import numba, numba_cuda, numpy, torch, gymnasium; print('numba', numba.__version__, 'numba-cuda', numba_cuda.__version__, 'numpy', numpy.__version__, 'torch', torch.__version__, 'gymnasium', gymnasium.__version__)" 2>&1 | tee -a "$LOG"
 stamp "1. gpu tests"
-[ -n "${SKIP_TESTS:-}" ] || timeout 100 python3 -m pytest -q -p no:cacheprovider -m gpu tests/test_cuda.py -x 2>&1 | tail -25 >> "$LOG"
+[ -n "${SKIP_TESTS:-}" ] || timeout 100 python3 -m pytest -q -p no:cacheprovider -m gpu tests/backends/test_cuda.py -x 2>&1 | tail -25 >> "$LOG"
 stamp "2. CUDA against CPU, step by step"
-timeout "${CHECK_SECONDS:-45}" python3 tests/cuda_sim_check.py 30 >> "$LOG" 2>&1; echo "exit $?" >> "$LOG"
+timeout "${CHECK_SECONDS:-45}" python3 tests/backends/cuda_sim_check.py 30 >> "$LOG" 2>&1; echo "exit $?" >> "$LOG"
 stamp "3. throughput"
 timeout "${THROUGHPUT_SECONDS:-150}" python3 -m devtools.throughput_gpu --variants ${THROUGHPUT_ARGS:-} --out docs/throughput_gpu.md 2>&1 | tail -20 >> "$LOG"
 cp docs/throughput_gpu.md "$OUT/" 2>/dev/null
@@ -33,11 +33,11 @@ if [ -n "${PPO_GRAPH_PROBE:-}" ]; then  # a short run with the rollout captured 
   timeout "${PROBE_SECONDS:-40}" python3 -m training.ppo_torch --env-backend cuda --device cuda --num-envs 4096 --total-timesteps 400000 \
       --eval-episodes 8 --cuda-graph on --out /tmp/ppo_probe 2>&1 | grep -v Warn | tail -25 >> "$LOG"
 fi
-timeout "${PPO_SECONDS:-90}" python3 -m training.ppo_torch --config configs/train/ppo_torch_gpu.yaml --env-backend cuda \
+timeout "${PPO_SECONDS:-90}" python3 -m studies.ppo_torch_report --config configs/train/ppo_torch_gpu.yaml --env-backend cuda \
     --device cuda --curve-points 5 ${PPO_ARGS:-} --report docs/ppo_torch_gpu.md --out /tmp/ppo 2>&1 | tail -6 >> "$LOG"
 cp docs/ppo_torch_gpu.md "$OUT/" 2>/dev/null
 stamp "5. scale_rl $*"
-timeout "${SCALE_SECONDS:-170}" python3 -m training.scale_rl --out docs/scale_rl.md "$@" 2>&1 | tail -12 >> "$LOG"
+timeout "${SCALE_SECONDS:-170}" python3 -m studies.scale_rl --out docs/scale_rl.md "$@" 2>&1 | tail -12 >> "$LOG"
 cp docs/scale_rl.md docs/scale_rl.csv docs/scale_rl.png "$OUT/" 2>/dev/null
 stamp "done"
 ls -la "$OUT" >> "$LOG"

@@ -35,8 +35,8 @@ import numpy as np
 import gymnasium as gym
 
 import penny_env  # noqa: F401  (registers the ids)
-from penny_env.analysis.common import cpu_model, load_line
-from penny_env.analysis.provenance import stamp_line
+from studies.common import cpu_model, load_line
+from studies.provenance import stamp_line
 from penny_env.envs.registration import env_ids
 
 WALLED = "PennyImpacts-Stadium-v0"

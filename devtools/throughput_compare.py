@@ -176,8 +176,8 @@ def main(argv: list[str] | None = None) -> str:
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
     cmd = "python -m devtools.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
     # (imported here: the workers run this file against other source trees, which may lack these)
-    from penny_env.analysis.common import load_line
-    from penny_env.analysis.provenance import stamp_line
+    from studies.common import load_line
+    from studies.provenance import stamp_line
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",

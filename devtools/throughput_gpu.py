@@ -126,7 +126,7 @@ def cpu_rate(env_id: str, n: int, steps: int) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from penny_env.analysis.common import header, report_path, table, write
+    from studies.common import header, report_path, table, write
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes and few steps (a smoke run)")
@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     if name is None:
         print("throughput_gpu: no CUDA GPU here (numba-cuda and torch see no device; the CUDA simulator does not "
               "count): nothing measured, no report written. The GPU backend is built and tested in simulation "
-              "(tests/test_cuda.py).")
+              "(tests/backends/test_cuda.py).")
         return 0
     from penny_env.backends.env import FAST_MAX_REGISTERS
     rows, var_rows, best = [], [], (0.0, 0)

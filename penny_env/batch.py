@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .physics import SolverSettings, make_law, make_table  # noqa: F401 (make_table re-exported)
-from .physics import advance_pennies, apply_law, end_kinematics, first_impacts
+from .backends.pennies import advance_pennies, first_impacts
+from .physics import apply_law, end_kinematics
 from .physics import flow as _flow
 from .physics.faults import check_mapped
 from .physics.simulation import FREE_INTERVAL, MAX_INTERVALS, interval_grid
@@ -92,7 +93,7 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
     if _backend(backend) == "cuda":
         from .backends.batch import CompiledBatch
         from .physics.laws import ImpactLaw
-        from .physics.pennies import FIRST_IMPACT_ROUNDS
+        from .backends.pennies import FIRST_IMPACT_ROUNDS
         return CompiledBatch(params, tab, ImpactLaw("elastic", 1.0), settings, target=_cuda_target()).first_impacts(
             S, acc1, acc2, h, FIRST_IMPACT_ROUNDS)
     return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=backend)
@@ -175,7 +176,7 @@ def _stepper(params, table, law, settings, backend):
         if not compiles(table):
             raise ValueError(f"backend='cuda': table {type(table).__name__} has no compiled formulas")
         return CompiledBatch(params, table, law, settings, target=_cuda_target()).states_and_impacts
-    if choose_backend(backend, params, table, law, settings, python="python") == "numba":
+    if choose_backend(backend, table, python="python") == "numba":
         return CompiledBatch(params, table, law, settings).states_and_impacts
 
     def step(S, acc1, acc2, dt):
@@ -193,7 +194,7 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
     (backends/physics.py), "cuda" the same functions on a GPU, one thread per penny (numpy in and out,
     copied each interval; docs/gpu.md), "python" the same loop in plain Python (slow: for debugging and tests);
     "auto" (default) takes numba where it is installed and the table compiles (with a one-time
-    warning otherwise). Both give bitwise the same results (tests/test_compiled.py). A law or a table that
+    warning otherwise). Both give bitwise the same results (tests/backends/test_compiled.py). A law or a table that
     breaks its contract at an impact raises a ValueError naming it and the penny (physics/faults.py)."""
     params = check_params(params)
     tab = _table(table, params)

@@ -4,7 +4,7 @@
                                         [--gif PATH [--gif-success]] [--best]
 
 RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip): the output
-folder of training.train and every (cell, agent, seed) folder of training.study for PPO/SAC.
+folder of training.train and every (cell, agent, seed) folder of studies.study for PPO/SAC.
 --best evaluates best_model.zip (the best evaluation during training) instead of the final model,
 into RUN_DIR/evaluation_best.json. Episodes are deterministic-policy
 episodes on fresh seeds (default: the run's evaluation seeds). The interval is Wilson's score

@@ -25,7 +25,7 @@ policy's forward pass, the sampling, the env's step and the rollout buffer's wri
 captured once in a CUDA graph and replayed at every iteration with ``--cuda-graph on``: the host launches one
 graph per rollout instead of a few hundred kernels. It is off by default: on an H200 (2026-11-26) the capture
 of the whole rollout failed inside torch while the env's step alone captured and replayed bitwise
-(backends/cuda_env.CudaGraphStep, tests/test_cuda.py); eager rollouts trained 30M steps in 14 s there
+(backends/cuda_env.CudaGraphStep, tests/backends/test_cuda.py); eager rollouts trained 30M steps in 14 s there
 (docs/ppo_torch_gpu.md). The env's outputs stay valid until the
 step after the next (penny_env's device step uses two output sets in turn), which is all a rollout needs.
 
@@ -522,14 +522,10 @@ def load_agent(run_dir, device="cpu") -> Agent:
     return agent.to(device)
 
 
-def parse_args(argv=None) -> Args:
-    """The run's Args from the command line (training.train's config files, flags, --set)."""
-    return parse_cli(argv)[0]
-
-
-def parse_cli(argv=None) -> tuple[Args, str | None]:
-    """(Args, the --report path or None)."""
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args(argv=None, ap=None) -> Args:
+    """The run's Args from the command line (training.train's config files, flags, --set); ``ap``: a parser to
+    add these arguments to (a study's, with arguments of its own: read them from ``ap.last``)."""
+    ap = ap or argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = Args()
     ap.add_argument("--config", default=None, help="a training config (YAML, e.g. configs/train/ppo_reach_ellipse.yaml) "
                                                    "whose env, budget and SB3 PPO hyperparameters to use")
@@ -548,11 +544,9 @@ def parse_cli(argv=None) -> tuple[Args, str | None]:
     ap.add_argument("--eval-episodes", type=int, default=None, help=f"final evaluation (default {d.eval_episodes})")
     ap.add_argument("--torch-threads", type=int, default=1, help="torch.set_num_threads (default 1)")
     ap.add_argument("--quick", action="store_true", help="a few thousand steps (< 60 s on a CPU): checks the pipeline")
-    ap.add_argument("--report", default=None, help="also write a markdown report of the run here (e.g. "
-                    "docs/ppo_torch_gpu.md: throughput, evaluation and the success curve, with the device's name)")
     ap.add_argument("--out", default=None, help="output folder (default runs/ppo_torch/<env_id>_<seed>; "
                                                 "--quick: a new temporary directory)")
-    a = ap.parse_args(argv)
+    a = ap.last = ap.parse_args(argv)
     try:
         if a.config:
             from training.train import load_config
@@ -567,11 +561,9 @@ def parse_cli(argv=None) -> tuple[Args, str | None]:
         args = dataclasses.replace(args, device=a.device, env_backend=a.env_backend, torch_threads=a.torch_threads,
                                    quick=a.quick, out=a.out, **{k: v for k, v in changes.items() if v is not None})
         check_args(quick_args(args) if args.quick else args)
-        if a.report is not None and a.quick and Path(a.report).resolve().is_relative_to(ROOT / "docs"):
-            raise ValueError("--quick never writes into docs/: give --report a path outside it")
     except ValueError as exc:
         ap.error(str(exc))
-    return args, a.report
+    return args
 
 
 def parse_sets(items) -> dict:
@@ -586,39 +578,8 @@ def parse_sets(items) -> dict:
     return out
 
 
-def write_report(path, argv, results: dict) -> None:
-    """A markdown report of one run: the machine and device, throughput, the final evaluation and the curve."""
-    from penny_env.analysis.common import header, table, write
-    device = results["device"]
-    if device.startswith("cuda"):
-        import torch
-        device = f"{device} ({torch.cuda.get_device_name(0)})"
-    ev = results.get("eval") or {}
-    lines = header(f"training.ppo_torch on {results['env_id']}", "training.ppo_torch", argv)
-    lines += [f"- device: {device}; env state on the device: {results['env_on_device']}; rollouts replayed from a "
-              f"CUDA graph: {results['cuda_graph']}", "",
-              *table(["env steps", "training s", "env-steps/s (end to end)", "rollout s", "update s",
-                      "training success (last 100 episodes)", "evaluation success", "evaluation episodes",
-                      "evaluation mean return"],
-                     [[f"{results['timesteps']:,}", f"{results['train_seconds']:.1f}", f"{results['steps_per_s']:,.0f}",
-                       f"{results['rollout_seconds']:.1f}", f"{results['update_seconds']:.1f}",
-                       f"{results['train_success_rate']:.2f}", f"{ev.get('success_rate', float('nan')):.3f}",
-                       f"{ev.get('episodes', 0)}", f"{ev.get('mean_return', float('nan')):.2f}"]])]
-    if results["curve"]:
-        lines += ["", "Deterministic evaluations during training (not counted in the training time):", "",
-                  *table(["env steps", "training s", "success", "mean return"],
-                         [[f"{c['global_step']:,}", f"{c['wall_time_s']:.1f}", f"{c['success_rate']:.3f}",
-                           f"{c['mean_return']:.2f}"] for c in results["curve"]])]
-    write(str(path), lines)
-
-
 def main(argv=None):
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args, report = parse_cli(argv)
-    agent, results = train(args)
-    if report is not None:
-        write_report(report, argv, results)
-    return agent, results
+    return train(parse_args(list(sys.argv[1:] if argv is None else argv)))
 
 
 if __name__ == "__main__":

@@ -1,21 +1,15 @@
-"""Accuracy, speed and dynamics analysis of penny_env: reference data, other integrators, reports.
+"""Dynamics tools of the penny, on the exact physics (DynamicalBilliards.jl's counterparts):
 
-Modules (each report is a command, ``python -m penny_env.analysis.<name> --help``):
+* :mod:`penny_env.analysis.boundary_map` - the boundary (Birkhoff) map, its tangent maps and Lyapunov spectra,
+  the invariant measure's sampler;
+* :mod:`penny_env.analysis.periodic_orbits` - periodic orbits of the elastic boundary map, their stability, and
+  finite-time exponents on slices of the map;
+* :mod:`penny_env.analysis.dynamics` - reachable sets and finite-time Lyapunov exponents of batches of pennies;
+* :mod:`penny_env.analysis.impact_geometry` - the impact laws in scaled speeds (the formulas of
+  docs/controllability_theory.md);
+* :mod:`penny_env.analysis.controllability_theorems` - which cells and start/target pairs a theorem of
+  docs/controllability_theory.md makes impossible.
 
-* :mod:`penny_env.analysis.reference`  - the mpmath reference data (reference_data/, made by
-  tests/reference/make_reference.py) as float64 numpy;
-* :mod:`penny_env.analysis.integrators` - scipy ``solve_ivp`` hybrid integrator and fixed-step RK4 with a
-  linear event locator (the impact maps are penny_env's, only the integration differs);
-* :mod:`penny_env.analysis.matching`   - impact matching (found / missed / spurious) and error measures;
-* :mod:`penny_env.analysis.bench_solvers`  - speed and accuracy against solve_ivp (DOP853) on the paper's scenes;
-* :mod:`penny_env.analysis.work_precision` - work-precision diagram over several methods and scenes;
-* :mod:`penny_env.analysis.stability`  - stress cases with pass/fail;
-* :mod:`devtools.throughput` - environment steps per second next to Gymnasium's own environments;
-* :mod:`penny_env.analysis.paper_figures` - the paper's figures;
-* :mod:`penny_env.analysis.dynamics`   - reachable sets and Lyapunov exponents of batches of pennies;
-* :mod:`penny_env.analysis.controllability` - does controllability of the penny need impacts? (sampled reachable sets).
-* :mod:`penny_env.analysis.impact_geometry` - the impact laws in scaled speeds and the formulas of docs/controllability_theory.md.
-* :mod:`penny_env.analysis.controllability_theorems` - which probe cells and start/target pairs a theorem makes impossible.
-
-scipy, matplotlib and tqdm are imported only inside these modules (never at ``import penny_env``).
+The reports built on them (and the mpmath reference, the other integrators, the studies) live in the
+repository's ``studies/`` folder, not in the package: ``python -m studies.<name> --help``.
 """

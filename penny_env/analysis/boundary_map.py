@@ -214,10 +214,10 @@ def _searcher(params, tab):
     from ..backends.batch import CompiledBatch
     from ..backends.choice import choose_backend
     from ..physics.params import DEFAULT_SETTINGS
-    from ..physics.pennies import FIRST_IMPACT_ROUNDS
+    from ..backends.pennies import FIRST_IMPACT_ROUNDS
 
     law = make_law("elastic")  # the search does not depend on the law
-    if choose_backend("auto", params, tab, law, DEFAULT_SETTINGS, python="python") != "numba":
+    if choose_backend("auto", tab, python="python") != "numba":
         return lambda S: batch.first_impact(S, (0.0, 0.0), HORIZON, params=params, table=tab)
     cb = CompiledBatch(params, tab, law, DEFAULT_SETTINGS)
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..envs.tasks.park import rest_speed
+from ..step.tasks.park import rest_speed
 
 DOC = "controllability_theory.md"
 POLYGON = 8192        # vertices of the inscribed polygon of the wall (wall_distance_lower)

@@ -1,6 +1,6 @@
 """The backends layer: every compile concern of penny_env in one place.
 
-The physics (penny_env/physics/) and the env step's stages (penny_env/envs/functional.py, envs/tasks/) are
+The physics (penny_env/physics/) and the env step's stages (penny_env/step/functional.py, step/tasks/) are
 plain Python and import no numba. This layer compiles them:
 
 ==================  ===========================================================================================

@@ -1,7 +1,7 @@
 """One builder for the three targets of the package's plain-Python functions.
 
 The physics (physics/kernels.py, flows.py, scalar.py, the tables' formulas, the laws), the env step's stages
-(envs/functional.py) and the tasks (envs/tasks/) are written once, as plain Python on floats and tuples. A
+(step/functional.py) and the tasks (step/tasks/) are written once, as plain Python on floats and tuples. A
 :class:`Builder` makes copies of those very functions for one target, whose globals are one shared namespace
 (a function calls its callees' copies):
 
@@ -103,7 +103,8 @@ class Builder:
         self.cache = bool(cache) and target == "cpu"
         self.namespace: dict = {"__builtins__": builtins, "prange": range}
         self.origin: dict = {}  # name -> the plain function whose copy the namespace holds under that name
-        self._modules: dict = {}  # module name -> the namespace of its functions' copies (copy_foreign)
+        self._modules: dict = {}  # id(globals dict) -> (that dict, the namespace of its functions' copies)
+        self._copies: dict = {}   # function -> its copy (copy_foreign), keyed on the function object itself
         self._jit = self._inline = None  # the python target copies without compiling
         if target == "cpu":
             import numba
@@ -147,35 +148,42 @@ class Builder:
         return out
 
     def copy_foreign(self, f, name):
-        """A copy of f, a function of another module (a task's stage, maybe a user's), stored in the namespace
-        under ``name``. Its globals are its own module's, with three changes: penny_env's functions that this
-        build copied (the physics, the draws) are the build's copies; the module's other plain functions are
-        copied alike (so its helpers compile with it); the math namespaces are the target's. A function
-        imported from another module of the same top-level package, or of penny_env (a built-in task's
-        helper), gets that module's namespace."""
-        out = self._module_namespace(f.__module__)[f.__name__]
+        """A copy of f itself, a function of another module (a task's stage, maybe a user's: a closure, a lambda,
+        one of two functions of one name), stored in the namespace under ``name``. Its globals are those f
+        itself sees (``f.__globals__``, never a lookup by name), with three changes: penny_env's functions that
+        this build copied (the physics, the draws) are the build's copies; the other plain functions defined
+        there are copied alike (so its helpers compile with it); the math namespaces are the target's. A
+        function it reaches that was defined in another module of the same top-level package, or of penny_env
+        (a built-in task's helper), is copied with that function's own globals."""
+        out = self._foreign_copy(f)
         self.namespace[name] = out
         return out
 
-    def _module_namespace(self, module_name):
-        import sys
-        if module_name in self._modules:
-            return self._modules[module_name]
+    def _foreign_copy(self, f):
+        """The copy of function f (once per build and function object) with :meth:`_globals_namespace`."""
+        if f not in self._copies:
+            self._copies[f] = jit_copy(f, self._globals_namespace(f.__globals__), self._jit, self.variant,
+                                       math=self.math)
+        return self._copies[f]
+
+    def _globals_namespace(self, g: dict) -> dict:
+        """The namespace of the copies of the functions whose globals are the dict ``g`` (once per build)."""
+        key = id(g)
+        if key in self._modules:
+            return self._modules[key][1]
         ns = {"__builtins__": builtins}
-        self._modules[module_name] = ns
-        package = module_name.split(".")[0]
-        for k, v in vars(sys.modules[module_name]).items():
+        self._modules[key] = (g, ns)  # (g held: its id stays its own while the build lives)
+        package = str(g.get("__name__") or "").split(".")[0]
+        for k, v in list(g.items()):
             if k.startswith("__"):
                 continue
             if k in ("SCALAR", "ARRAY", "XP"):
                 ns[k] = self.math
             elif isinstance(v, types.FunctionType) and self.origin.get(v.__name__) is v:
                 ns[k] = self.namespace[v.__name__]
-            elif isinstance(v, types.FunctionType) and v.__module__ == module_name:
-                ns[k] = jit_copy(v, ns, self._jit, self.variant, math=self.math)
-            elif (isinstance(v, types.FunctionType) and v.__module__ in sys.modules
-                  and v.__module__.split(".")[0] in (package, "penny_env")):
-                ns[k] = self._module_namespace(v.__module__)[v.__name__]
+            elif isinstance(v, types.FunctionType) and (v.__globals__ is g or str(v.__module__).split(".")[0]
+                                                        in (package, "penny_env")):
+                ns[k] = self._foreign_copy(v)
             else:
                 ns[k] = v
         return ns

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import importlib.util
 
+from .checks import check_compiled_formulas
+
 
 def available() -> bool:
     """numba is installed, so compiled batches can run (numba itself is imported at first use)."""
@@ -19,11 +21,19 @@ def compiles(table) -> bool:
     return table is None or compiled_kind(type(table)) >= 0
 
 
-def choose_backend(backend, params, table, law, settings, table_field="table", python="numpy") -> str:
+def choose_backend(backend, table, table_field="table", python="numpy") -> str:
     """'numba' or the plain-Python name ``python`` for ``backend`` in 'auto', 'numba', ``python``:
     'auto' takes numba where it is installed and the table compiles (:func:`compiles`), and warns once
     per table type naming the slower plain-Python path where it does not; an explicit 'numba' that
-    cannot run raises ValueError naming the cause."""
+    cannot run raises ValueError naming the cause. Where numba is chosen for a user's table, its compiled
+    formulas are first compared with its own methods (checks.check_compiled_formulas)."""
+    chosen = _choose(backend, table, table_field, python)
+    if chosen == "numba":
+        check_compiled_formulas(table)
+    return chosen
+
+
+def _choose(backend, table, table_field, python) -> str:
     if backend not in ("auto", python, "numba"):
         raise ValueError(f"backend must be 'auto', {python!r} or 'numba', got {backend!r}")
     ok = compiles(table)

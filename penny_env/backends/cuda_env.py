@@ -1,6 +1,6 @@
 """The vector env's step resident on a CUDA GPU (PennyVectorEnv(..., backend="cuda")).
 
-The same step as on the CPU (envs/functional.step_env: the stages and the autoreset in all three of
+The same step as on the CPU (step/functional.step_env: the stages and the autoreset in all three of
 Gymnasium's modes, written once), built by backends/env.py as a kernel with one thread per env. Everything
 a step touches lives on the device in buffers allocated once: the envs' state (functional.EnvState, with
 each env's seed key, episode counter and pending-reset flag: resets are drawn on the device, by the same
@@ -17,7 +17,7 @@ the CPU's checks and info layout). The two output sets alternate, so a step's ou
 step after the next; info masks (``_key``) are constant device tensors shared by all steps.
 
 Runs under numba's CUDA simulator too (NUMBA_ENABLE_CUDASIM=1; outputs "device" or "numpy"), which is how
-the tests check it against the CPU backend on machines without a GPU (tests/test_cuda.py).
+the tests check it against the CPU backend on machines without a GPU (tests/backends/test_cuda.py).
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import contextlib
 
 import numpy as np
 
-from ..envs.functional import SAME_STEP, EnvState, StepResults, kinetic_energy
+from ..step.functional import SAME_STEP, EnvState, StepResults, kinetic_energy
 from ..physics.scalar import ImpactBuffers
 
 
@@ -165,7 +165,7 @@ class DeviceStep:
         TypeError for a wrong type, a ValueError for a wrong shape; non-finite values are refused on the host
         for host arrays (and for device ones with numpy outputs), and otherwise end the env's episode in the
         kernel (functional.LIMIT_ACTION)."""
-        from ..envs.core import check_actions
+        from ..step.actions import check_actions
         shape = (self.n, self.n_act)
         torch = self.torch
         if torch is not None and isinstance(actions, torch.Tensor) and actions.is_cuda:

@@ -1,6 +1,6 @@
 """The env step built for a target: :func:`env_entry_points` returns the typed record of entry points of
-one (target, table kind, task), built by backends/builder.py from envs/functional.py's stages, the task's
-record (envs/tasks/) and the compiled physics (backends/physics.py).
+one (target, table kind, task), built by backends/builder.py from step/functional.py's stages, the task's
+record (step/tasks/) and the compiled physics (backends/physics.py).
 
 Entry points take the constants packed as one float64 array (backends/packing.py) and the records as plain
 tuples of arrays (numba unboxes a plain tuple several times faster than a NamedTuple): the small functions
@@ -13,10 +13,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from ..envs import draws, functional
+from ..step import draws, functional
 import math
 
-from ..envs.functional import (NEXT_STEP, SAME_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots,
+from ..step.functional import (NEXT_STEP, SAME_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots,
                                conclude, distance, env_row, env_step, initial_state, limit_of, observe_row, observe_rows,
                                reset_row, reset_rows, same_step_reset, step_env, step_envs, write_observation,
                                write_outputs, write_state)
@@ -226,11 +226,24 @@ STEP_PASTED = (functional.clear_slots, functional.clear_row, env_step, functiona
 _ENTRY: dict = {}  # (target, variant_key(kind), task record, constants type) -> EnvEntryPoints
 
 
+def obs_bounds_check(extra_obs):
+    """``task_obs_in_bounds(obs, i)``: the task's own observation entries of row i (columns 10 on) within their
+    declared bounds (a task record's extra_obs), generated with the bounds as literals (a real file:
+    backends/generated.py). NaN fails every comparison, so it is out of bounds too."""
+    terms = [f"({float(lo)!r} <= obs[i, {10 + j}] <= {float(hi)!r})" for j, (lo, hi) in enumerate(extra_obs)]
+    source = ("def task_obs_in_bounds(obs, i):\n    return " + " and ".join(terms) + "\n") if terms else \
+        "def task_obs_in_bounds(obs, i):\n    return True\n"
+    f = generated.define("task_obs_in_bounds", source, {}, __name__)["task_obs_in_bounds"]
+    return f
+
+
 def env_modules(record) -> tuple:
-    """The modules the env build inlines (their sources go into the copies' names: backends/cache.py)."""
+    """The modules the env build inlines (their sources go into the copies' names: backends/cache.py): the
+    physics, the step, this module, and the modules (with a source file) that define the task's stages."""
     import sys
     stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
-    task_modules = tuple(dict.fromkeys(sys.modules[f.__module__] for f in stages))
+    task_modules = tuple(dict.fromkeys(m for m in (sys.modules.get(f.__module__) for f in stages)
+                                       if m is not None and getattr(m, "__file__", None)))
     return physics_modules() + (functional, draws, sys.modules[__name__], packing) + task_modules
 
 
@@ -238,7 +251,7 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
                      max_registers=None, law: int = -1) -> EnvEntryPoints:
     """The entry points of the env step for ``target`` ("python", "cpu", "cuda"), table kind ``kind`` (the
     Model.kind of the constants they will receive: the compiled physics calls that table's formulas whatever
-    Model.kind says; the python target runs any), the task ``record`` (envs/tasks/) and its constants' type.
+    Model.kind says; the python target runs any), the task ``record`` (step/tasks/) and its constants' type.
     Built once per process and key; fresh: build anew, keep nothing (the PTX tests). max_registers: CUDA's
     per-thread register cap of the fast step kernel (None: the compiler's choice). law: the Model.law of the
     constants (a user's law is compiled only into the builds that run it: physics.build_laws)."""
@@ -249,7 +262,7 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     key = (target, variant_key(kind, law), record, constants_type, max_registers)
     if key in _ENTRY and not fresh:
         return _ENTRY[key]
-    from ..envs.functional import EnvParams
+    from ..step.functional import EnvParams
     from ..physics.scalar import Model
     phys = physics_build(target, kind, fresh, law)  # (also picks the threading layer: backends/threads.py)
     stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
@@ -272,8 +285,10 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     b.copy_foreign(record.target, "task_target")
     if record.observation is not None:
         b.copy_foreign(record.observation, "task_observation")
+        b.copy(obs_bounds_check(record.extra_obs), name="task_obs_in_bounds")
     else:
         b.copy(functional.no_task_observation, name="task_observation")
+        b.copy(functional.no_task_obs_bounds, name="task_obs_in_bounds")
     if record.marked_arc is not None:
         b.copy_foreign(record.marked_arc, "task_marked_arc")
     else:

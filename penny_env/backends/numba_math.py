@@ -10,7 +10,7 @@ scalar = True
 sin, cos, sqrt, inf, pi = math.sin, math.cos, math.sqrt, math.inf, math.pi
 abs, minimum, maximum = abs, min, max
 
-# 64-bit integers of the counter-based draws (envs/draws.py): numpy's uint64, whose arithmetic wraps
+# 64-bit integers of the counter-based draws (step/draws.py): numpy's uint64, whose arithmetic wraps
 u64, to_float = np.uint64, float
 ONE = np.uint64(1)
 GOLDEN, M1, M2 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)

@@ -7,7 +7,7 @@ table's own formulas (``wall_terms``, ``wall_hess`` and ``wall_distance`` call t
 search pays no branch over the registered shapes and keeps its helpers inlined) and a dispatch over the
 registered laws (:func:`law_dispatch_source`, generated into a real file): laws only act at impacts. The
 physics is compiled once per (target, table kind, the table's formulas, the laws). A penny takes the same
-operations as in the plain-Python loop (the "python" target); tests/test_compiled.py checks that they agree
+operations as in the plain-Python loop (the "python" target); tests/backends/test_compiled.py checks that they agree
 bitwise.
 """
 from __future__ import annotations

@@ -29,7 +29,7 @@ What penny_env does (docs/contention.md measures the alternatives side by side):
 * so do calls with fewer than :data:`SERIAL_BELOW` pennies, where waking the sleeping threads would cost
   more than the work.
 
-tests/test_parallel.py checks all three cases. What remains is in README.md ("Deployment").
+tests/backends/test_parallel.py checks all three cases. What remains is in README.md ("Deployment").
 """
 from __future__ import annotations
 

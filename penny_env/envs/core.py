@@ -1,7 +1,7 @@
 """What PennyEnv and PennyVectorEnv share besides the step (functional.py): the scene's constants, the task's
 record and constants, the spaces' bounds, the seeds' checks and the reset options' checks.
 
-Episode randomness is counter based (envs/draws.py): the initial state and target of episode ``e`` of an env
+Episode randomness is counter based (step/draws.py): the initial state and target of episode ``e`` of an env
 whose seed key is ``k`` are a hash of (k, e, draw index), drawn per env by functional.initial_state on every
 backend. A sub-env of the vector env seeded with ``seed + i`` therefore draws exactly what a single env
 seeded with ``seed + i`` draws, episode after episode, on the CPU and on a GPU.
@@ -12,12 +12,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import SolverSettings
+from ..physics.faults import warn_episode_fault
 from ..physics.validation import as_state, check_inside, real_array
-from .config import ConfigError
-from .draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
+from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT
+from ..step.actions import check_actions  # noqa: F401 (the envs check actions with it)
+from ..step.config import ConfigError
+from ..step.draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
 from .scene import Scene, Task
-from .tasks import task_record
-from .tasks.base import check_constants
+from ..step.tasks import task_record
+from ..step.tasks.base import check_constants
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
@@ -50,7 +53,8 @@ def check_seed(seed, name: str = "seed", count: int = 1) -> int:
 class Core:
     """Everything the environments compute, from (Scene, Task). Picklable (rebuilt from them)."""
 
-    def __init__(self, scene: Scene, task: Task, settings: SolverSettings | None = None, backend: str = "auto"):
+    def __init__(self, scene: Scene, task: Task, settings: SolverSettings | None = None, backend: str = "auto",
+                 record=None):
         self.scene, self.task = scene, task
         self.settings = settings if settings is not None else SolverSettings()
         self.params = scene.make_params()
@@ -66,10 +70,16 @@ class Core:
         self.plane = self.table is None
         self.L = scene.length_scale()
         self.inv_L = 1.0 / self.L
-        self.task_record = task_record(task.kind)
+        self.task_record = task_record(task.kind) if record is None else record
         if self.task_record.needs_walls and self.table is None:
             raise ConfigError(f"task.kind {task.kind!r} needs a table with walls; scene.table is the open plane")
-        self.k = self.task_record.constants(scene, task, self.L)
+        try:
+            self.k = self.task_record.constants(scene, task, self.L)
+        except (ConfigError, TypeError) as exc:
+            raise type(exc)(str(exc)) from None
+        except Exception as exc:  # noqa: BLE001 (the task's own function: named, not a bare ZeroDivisionError)
+            raise ValueError(f"task {self.task_record.name!r}: constants(scene, task, L) raised {type(exc).__name__}: "
+                             f"{exc}") from exc
         check_constants(self.task_record, self.k)
         self.counts_arc = self.task_record.marked_arc is not None  # info["arc_impacts"]
         self.impacts = self.counts_arc  # (the name the renderer and the info use)
@@ -86,11 +96,7 @@ class Core:
             raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
         if backend == "python":
             return "python"
-        try:
-            chosen = "numba" if choose_backend(backend, self.params, self.table, self.law, self.settings,
-                                               "scene.table") == "numba" else "python"
-        except ValueError as err:  # (the batch's wording names its own plain backend)
-            raise ValueError(str(err).replace("backend='numpy'", "backend='python'")) from None
+        chosen = choose_backend(backend, self.table, "scene.table", python="python")
         if chosen == "python":
             import warnings
             warnings.warn("penny_env: the compiled step cannot run here (numba missing or a table that does not "
@@ -113,7 +119,7 @@ class Core:
         the env step's own reset stage (functional.initial_state) on this core's backend."""
         from ..backends.packing import pack
         from ..physics.scalar import scalar_model
-        from .functional import EnvState, env_params
+        from ..step.functional import EnvState, env_params
         keys = np.ascontiguousarray(keys, dtype=np.uint64)
         n = keys.shape[0]
         st = EnvState(np.zeros((6, n)), np.zeros((4, n)), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n, np.int64),
@@ -200,20 +206,18 @@ class Core:
                              "can reach (no heading keeps both ends inside the table)")
 
 
-def check_actions(actions, shape, name="action"):
-    """float64 array of the given shape from actions: a TypeError for a wrong type (strings,
-    None, bools, complex numbers, objects), a ValueError naming the sub-env(s) for a wrong shape
-    or non-finite entries. Nothing is clipped here (the step clips)."""
-    arr = real_array(actions, name, "an array")  # also finds a bool or string inside a list
-    if arr.shape != shape:
-        if len(shape) == 2 and shape[1] == 1 and arr.shape == shape[:1]:
-            arr = arr[:, None]
-        else:
-            raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
-    finite = np.isfinite(arr)
-    if not finite.all():
-        if arr.ndim == 1:
-            raise ValueError(f"{name} has a non-finite entry: {arr.tolist()}")
-        bad = np.flatnonzero(~finite.all(axis=1))
-        raise ValueError(f"{name}: non-finite action in sub-env(s) {bad[:10].tolist()}{' ...' if bad.size > 10 else ''}")
-    return np.ascontiguousarray(arr)
+def warn_limits(core, limits) -> None:
+    """A RuntimeWarning per kind of guarded limit among ``limits`` (info["limit"] codes of episodes that ended): the
+    event loop's guard (physics/faults.py: a law or a table breaking its contract) or the task's outputs
+    (LIMIT_TASK_OUTPUT); info["limit"] names every one of them."""
+    for code in sorted(set(int(v) for v in limits)):
+        if code in FAULT_OF_LIMIT:
+            warn_episode_fault(LIMIT_NAMES[code], FAULT_OF_LIMIT[code], core.law, core.table)
+        elif code == LIMIT_TASK_OUTPUT:
+            import warnings
+            record = core.task_record
+            own = f" (declared bounds {record.extra_obs})" if record.extra_obs else ""
+            warnings.warn(f"penny_env: an episode ended, truncated with info['limit'] = 'task_output': task "
+                          f"{record.name!r} returned a reward that is not finite, drew a target that is not, or wrote "
+                          f"an observation entry of its own outside its extra_obs bounds{own}; fix the task's stages "
+                          "and register it again (penny_env.register_task)", RuntimeWarning, stacklevel=4)

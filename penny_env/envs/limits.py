@@ -5,7 +5,7 @@ beyond INT64_MAX they failed later with an OverflowError naming no field. A vect
 with num_envs (and max_impacts_in_info): a num_envs the machine cannot hold used to allocate gigabytes
 and die in step() with a MemoryError a minute later. :func:`check_memory` compares the estimate of
 :func:`vector_env_bytes` (the env's own arrays, counted from their shapes and dtypes below; checked
-against tracemalloc's measure in tests/test_limits.py) with the memory available now.
+against tracemalloc's measure in tests/envs/test_limits.py) with the memory available now.
 """
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ def vector_env_bytes(obs_dim: int, K: int) -> int:
     * the reset's arrays (not kept with two steps' outputs): obs, the info's impact slots, scalars and masks,
       the keys and episodes and the seeds' Python ints;
 
-    tests/test_limits.py checks it against tracemalloc."""
+    tests/envs/test_limits.py checks it against tracemalloc."""
     f8, i8, u8, f4, b1 = 8, 8, 8, 4, 1
     spaces = (obs_dim + 2) * (2 * f4 + 2 * b1)
     state = (6 + 4 + 2 + 2 + 1 + 1) * f8 + 3 * i8 + u8 + b1 + (i8 + b1) + b1

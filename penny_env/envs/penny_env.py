@@ -12,9 +12,8 @@ from gymnasium.error import ResetNeeded
 from ..backends.cache import announce_compile
 from ..backends.packing import pack
 from ..physics.scalar import impact_buffers, scalar_model
-from .core import Core, check_actions, check_seed, render_fps, seed_keys
-from ..physics.faults import warn_episode_fault
-from .functional import LIMIT_LAW_NONFINITE, LIMIT_NAMES, env_params, kinetic_energy
+from .core import Core, check_actions, check_seed, render_fps, seed_keys, warn_limits
+from ..step.functional import LIMIT_ACTION, LIMIT_LAW_NONFINITE, env_params, kinetic_energy
 from .limits import check_int64, check_memory, single_env_bytes
 from .scene import resolve
 
@@ -48,7 +47,7 @@ class PennyEnv(gym.Env):
     ``penny_env/presets/tasks/*.yaml``), YAML paths, dicts or :class:`~penny_env.envs.scene.Scene` /
     ``Task`` objects; keyword overrides set any field of either (see their docstrings); an unknown
     keyword raises ``UnknownFieldError`` (a ``ConfigError`` and a ``TypeError``), an invalid value a
-    ``ConfigError`` (a ``ValueError``), naming the field. The step is envs/functional.py's
+    ``ConfigError`` (a ``ValueError``), naming the field. The step is step/functional.py's
     ``env_step`` (the one PennyVectorEnv runs for each of its envs). backend: "numba" runs it
     compiled, "python" as plain Python (debugging; bitwise the same episodes, tested); "auto"
     (default) takes numba unless the table does not compile. truncate: False leaves truncation to a
@@ -137,7 +136,7 @@ class PennyEnv(gym.Env):
                         wall: the table's bounds are false): the event loop's run-time guard
                         stopped the step at that impact, with a RuntimeWarning naming the law or
                         the table (docs/envs.md#limits); names in
-                        ``penny_env.envs.functional.LIMIT_NAMES``
+                        ``penny_env.step.functional.LIMIT_NAMES``
     ==================  ==========================================================================
 
     **Bounded work.** Every step does bounded work whatever the actions: the scene's initial
@@ -307,8 +306,8 @@ class PennyEnv(gym.Env):
             self._hud.update(time=self._t, reward=float(reward), impact_count=self._hud["impact_count"] + n_imp)
             if self.render_mode == "human":
                 self.render()
-        if limit >= LIMIT_LAW_NONFINITE:  # the event loop's guard stopped the step (physics/faults.py)
-            warn_episode_fault(LIMIT_NAMES[limit], limit - 2, c.law, c.table)
+        if limit >= LIMIT_LAW_NONFINITE and limit != LIMIT_ACTION:  # a guard ended the episode (core.warn_limits)
+            warn_limits(c, (limit,))
         return obs[0], float(reward), terminated, truncated, info
 
     def _info(self, n_imp, times, ends, energy, success, limit=0):

@@ -22,8 +22,8 @@ from ..physics.params import MAX_ANGULAR_SPEED
 from ..physics.tables import TABLE_KINDS, Table
 from ..physics.tables.base import LENGTH_RANGE
 from ..physics.validation import check_actuation, check_table, step_speed_limits
-from .config import ConfigError, ConfigTypeError, UnknownFieldError, number
-from .tasks import TASKS, Task, config_fields, task_record
+from ..step.config import ConfigError, ConfigTypeError, UnknownFieldError, number
+from ..step.tasks import TASKS, Task, config_fields, task_record
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "presets"
 
@@ -287,7 +287,7 @@ def _build_scene(data: dict, owner: str) -> Scene:
 
 
 def _build_task(data: dict, owner: str) -> Task:
-    """The task's configuration: the class its registered kind names (envs/tasks/), its fields checked."""
+    """The task's configuration: the class its registered kind names (step/tasks/), its fields checked."""
     record = task_record(data.get("kind", "reach"))
     allowed = config_fields(record.name)
     unknown = sorted(set(data) - set(allowed))
@@ -298,7 +298,7 @@ def _build_task(data: dict, owner: str) -> Task:
 
 def resolve(scene="ellipse", task="reach", **overrides) -> tuple[Scene, Task]:
     """Validated (Scene, Task) from presets (names, YAML paths, dicts) and field overrides. A task field must
-    be one of the fields of the task's kind (its registered record's configuration, envs/tasks/)."""
+    be one of the fields of the task's kind (its registered record's configuration, step/tasks/)."""
     sc = _preset("scene", scene)
     tk = _preset("task", task)
     kind = overrides.get("kind", tk.get("kind", "reach"))

@@ -1,4 +1,4 @@
-"""PennyVectorEnv: N pennies stepped by one loop over the one-env step (envs/functional.py)."""
+"""PennyVectorEnv: N pennies stepped by one loop over the one-env step (step/functional.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,9 +13,8 @@ from ..backends.choice import compiles
 from ..backends.packing import pack
 from ..backends.threads import SERIAL_BELOW
 from ..physics.scalar import scalar_model
-from .core import Core, check_actions, check_seed, render_fps, seed_keys, X, Y
-from ..physics.faults import warn_episode_fault
-from .functional import (DISABLED, LIMIT_ACTION, LIMIT_LAW_NONFINITE, LIMIT_NAMES, NEXT_STEP, SAME_STEP, EnvState,
+from .core import Core, check_actions, check_seed, render_fps, seed_keys, warn_limits, X, Y
+from ..step.functional import (DISABLED, LIMIT_LAW_NONFINITE, NEXT_STEP, SAME_STEP, EnvState,
                          env_params, kinetic_energy)
 from .limits import check_int64, check_memory, vector_env_bytes
 from .scene import resolve
@@ -129,7 +128,7 @@ class PennyVectorEnv(VectorEnv):
             overrides["max_episode_steps"] = max_episode_steps
         self.scene, self.task = resolve(scene, task, **overrides)
         # the envs' arrays must fit in memory (envs/limits.py): refused here rather than by a MemoryError in step()
-        from .tasks import task_record
+        from ..step.tasks import task_record
         per_env = vector_env_bytes(task_record(self.task.kind).obs_dim, int(max_impacts_in_info))
         check_memory("num_envs", num_envs, per_env * int(num_envs),
                      f"a PennyVectorEnv of that many envs ({per_env} B per env with max_impacts_in_info = "
@@ -412,9 +411,7 @@ class PennyVectorEnv(VectorEnv):
         # are scanned faster by Python's max over the bytes)
         if (max(limits.tobytes()) if limits.size <= 64 else limits.max()) < LIMIT_LAW_NONFINITE:
             return
-        faults = limits[(limits >= LIMIT_LAW_NONFINITE) & (limits != LIMIT_ACTION)]
-        for code in np.unique(faults):
-            warn_episode_fault(LIMIT_NAMES[code], int(code) - 2, self._core.law, self._core.table)
+        warn_limits(self._core, np.unique(limits[limits >= LIMIT_LAW_NONFINITE]))
 
     def _final_info(self, info, final_obs, done, terminated):
         """SAME_STEP autoreset: the last obs and info of the envs whose episode ended (SB3-style object arrays

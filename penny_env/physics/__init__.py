@@ -1,12 +1,11 @@
 """The bouncing penny's physics: pure functions of (state, params, controls); no Gymnasium here."""
 from .params import PennyParams, SolverSettings
-from .tables import Table, Ellipse, Circle, Stadium, RoundedRectangle, ConvexTable, make_table, register_table
-from .laws import ImpactLaw, make_law, apply_law, register_law
+from .tables import Table, Ellipse, Circle, Stadium, RoundedRectangle, ConvexTable, make_table
+from .laws import ImpactLaw, make_law, apply_law
 from .flows import flow, kinetic_energy, end_kinematics
-from .pennies import advance_pennies, first_impacts, EventLog
 from .simulation import simulate, impact_map, Trajectory
 
 __all__ = ["PennyParams", "SolverSettings", "Table", "Ellipse", "Circle", "Stadium", "RoundedRectangle",
-           "ConvexTable", "make_table", "register_table", "ImpactLaw", "make_law", "apply_law", "register_law",
-           "flow", "kinetic_energy", "end_kinematics", "advance_pennies", "first_impacts", "EventLog", "simulate",
+           "ConvexTable", "make_table", "ImpactLaw", "make_law", "apply_law",
+           "flow", "kinetic_energy", "end_kinematics", "simulate",
            "impact_map", "Trajectory"]

@@ -10,7 +10,7 @@ Then the callers:
 * simulate() and the batch API raise the ValueError of :func:`fault_error`, naming the law or the table
   and the bound to fix;
 * the environments end the episode, truncated, with ``info["limit"]`` the fault's LIMIT_* code
-  (envs/functional.py) and a warning with the same words (:func:`warn_episode_fault`).
+  (step/functional.py) and a warning with the same words (:func:`warn_episode_fault`).
 
 Motion without faults is not changed by the guard.
 """
@@ -18,10 +18,15 @@ from __future__ import annotations
 
 import math
 
-from .law_checks import ENERGY_RTOL
-from .scalar import FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, FAULT_OUTSIDE, OUTSIDE_TOL
+from .law_checks import ENERGY_RTOL, OUTWARD_RTOL
 
-FAULT_NAMES = {FAULT_NONE: "", FAULT_NONFINITE: "law_nonfinite", FAULT_ENERGY: "law_energy", FAULT_OUTSIDE: "outside_wall"}
+# the codes the event loop records in ImpactBuffers.fault (scalar.advance_into) rather than raising in compiled code
+FAULT_NONE, FAULT_NONFINITE, FAULT_ENERGY, FAULT_OUTSIDE, FAULT_OUTWARD = 0, 1, 2, 3, 4
+OUTSIDE_TOL = 1e-8  # [table sizes] an end found farther outside the wall at an impact is a fault (FAULT_OUTSIDE):
+# 10 times what validation.check_inside lets a given state have, about 10^6 times the search's own penetration
+
+FAULT_NAMES = {FAULT_NONE: "", FAULT_NONFINITE: "law_nonfinite", FAULT_ENERGY: "law_energy", FAULT_OUTSIDE: "outside_wall",
+               FAULT_OUTWARD: "law_outward"}
 
 
 def _law_name(law) -> str:
@@ -55,6 +60,11 @@ def describe(code, law=None, table=None, depth=math.nan) -> str:
     if code == FAULT_ENERGY:
         return (f"{_law_name(law)} added kinetic energy at an impact, beyond round-off (relative "
                 f"{ENERGY_RTOL:g}); impact laws must not increase the kinetic energy: fix its update function and "
+                "register it again (register_law)")
+    if code == FAULT_OUTWARD:
+        return (f"{_law_name(law)} left the end of the penny moving outward after an impact (its normal speed "
+                f"beyond {OUTWARD_RTOL:g} of the one before): the search would find the same impact again at once, "
+                "forever; a law must send the end back inside (n+ = a W+ + b w+ <= 0): fix its update function and "
                 "register it again (register_law)")
     if code == FAULT_OUTSIDE:
         found = f" {depth:.3g} m" if math.isfinite(depth) and depth > 0 else ""
@@ -92,8 +102,9 @@ def check_faults(buf, law=None, table=None, states=None, R=None, t0=0.0, elapsed
 
 def check_mapped(S, post, sigma, params, table, law, name: str = "states") -> None:
     """The run-time guard's law checks for impact_map (which applies the law outside the event loop): a non-finite
-    velocity, or an energy gain beyond ENERGY_RTOL where the end moves outward (as the event loop applies a law),
-    is a ValueError naming the law and the row. S, post: (6, N) states before and after; sigma: the ends."""
+    velocity, an energy gain beyond ENERGY_RTOL or an end left moving outward where it moved outward before (as the
+    event loop applies a law), is a ValueError naming the law and the row. S, post: (6, N) states before and
+    after; sigma: the ends."""
     import numpy as np
 
     from .laws import normal_form
@@ -107,6 +118,10 @@ def check_mapped(S, post, sigma, params, table, law, name: str = "states") -> No
         after = Itot * (post[4] * post[4]) + J * (post[5] * post[5])
         bad = outward & (after > before * (1.0 + ENERGY_RTOL))
         code = FAULT_ENERGY
+        if not bad.any():
+            n_before, n_after = a * S[4] + b * S[5], a * post[4] + b * post[5]
+            bad = outward & np.broadcast_to(n_after > OUTWARD_RTOL * n_before, bad.shape)
+            code = FAULT_OUTWARD
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         where = name if S.shape[1] == 1 else f"{name}[{i}]"

@@ -32,7 +32,7 @@ MAX_PHASE_PER_PANEL = 3.0
 # Gauss-Legendre rules on [0, 1] by the phase a panel sweeps (phase_sweep): the integrand
 # (W + acc2 s) e^{i phi(s)} is entire, and the n-node rule's truncation error stays below 5e-17 of
 # the integral of |W + acc2 s| for sweeps up to its limit (the table made by
-# tests/reference/quadrature_rules.py with mpmath; tests/test_flow.py checks each limit against
+# tests/reference/quadrature_rules.py with mpmath; tests/physics/test_flow.py checks each limit against
 # mpmath through flow()). Control periods of RL scenes sweep about 0.1 rad: 6 or 7 nodes.
 RULE_SIZES = ((0.1, 6), (0.3, 7), (0.8, 8), (1.5, 9), (2.0, 10), (MAX_PHASE_PER_PANEL, 12))
 # Each rule is (limit, centred nodes on [-1/2, 1/2], weights, cis): a panel's integrand is

@@ -35,7 +35,7 @@ ARRAY = math_namespace("penny_env_array_math", False, sin=np.sin, cos=np.cos, sq
                        minimum=np.minimum, maximum=np.maximum, where=np.where, inf=np.inf)
 SCALAR = math_namespace("penny_env_scalar_math", True, sin=math.sin, cos=math.cos, sqrt=math.sqrt, abs=abs,
                         minimum=min, maximum=max, where=_where, inf=math.inf, pi=math.pi,
-                        # 64-bit integers of the counter-based draws (envs/draws.py): Python ints, masked there
+                        # 64-bit integers of the counter-based draws (step/draws.py): Python ints, masked there
                         u64=int, to_float=float, ONE=1, GOLDEN=0x9E3779B97F4A7C15, M1=0xBF58476D1CE4E5B9,
                         M2=0x94D049BB133111EB, MASK=(1 << 64) - 1, U11=11, U27=27, U30=30, U31=31)
 
@@ -50,7 +50,7 @@ _J1_REVERSED = tuple(_J1_COEFFS[::-1])
 
 # cos z and sin z / z by their Taylor series, in two sizes. Through z^10: truncation below 3e-19
 # for |z| <= SMALL_ANGLE; through z^14: below 3e-20 for |z| <= MEDIUM_ANGLE. There the Horner sums
-# are as accurate as libm (about 1 ulp, tests/test_compiled.py) and cost less than libm's sin and cos.
+# are as accurate as libm (about 1 ulp, tests/backends/test_compiled.py) and cost less than libm's sin and cos.
 SMALL_ANGLE = 0.15
 MEDIUM_ANGLE = 0.4
 _C0, _C1, _C2, _C3, _C4, _C5, _C6, _C7 = ((-1) ** j / math.factorial(2 * j) for j in range(8))

@@ -1,4 +1,5 @@
-"""What :func:`~penny_env.physics.laws.register_law` tries before it accepts a law.
+"""What ``penny_env.register_law`` tries before it accepts a law (physics.laws.law_record; the compiled trials:
+backends/checks.compile_law).
 
 A law is a plain function ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)`` that the event loop
 calls at every impact, compiled by numba (backends/physics.py). A law that cannot run there, or that
@@ -9,11 +10,13 @@ it first, with a message naming the law:
 * its signature binds the nine arguments (``inspect.signature``), and a trial call returns two real
   numbers (TypeError otherwise);
 * on :func:`trial_arguments`, typical impacts (the end moving outward, as the event loop calls a
-  law), it returns finite velocities and never adds kinetic energy ``(Itot W^2 + J w^2) / 2`` beyond
-  round-off (ENERGY_RTOL); a law registered with ``conserves_energy=True`` must also not lose any;
-* numba compiles it for float64 arguments (where numba is installed), and the compiled function
-  passes the same trials (numba's math differs from Python's on domain errors: ``math.sqrt(-1)`` is
-  NaN there, an exception here).
+  law), it returns finite velocities, never adds kinetic energy ``(Itot W^2 + J w^2) / 2`` beyond
+  round-off (ENERGY_RTOL) and leaves the end no longer moving outward (n+ = a W+ + b w+ <= OUTWARD_RTOL n:
+  the identity law would have the search find the same impact at once, forever); a law registered with
+  ``conserves_energy=True`` must also not lose any;
+* numba compiles it for float64 arguments, and the compiled function passes the same trials (numba's math
+  differs from Python's on domain errors: ``math.sqrt(-1)`` is NaN there, an exception here):
+  backends/checks.compile_law.
 
 The checks are a first line, not a proof: a law that misbehaves only away from the trial points is
 caught at run time by the event loop's guard (scalar.impact_fault), which ends the call with an
@@ -24,9 +27,14 @@ from __future__ import annotations
 import inspect
 import math
 
+from .numbers import is_real
 from .params import PennyParams
 
 ENERGY_RTOL = 1e-12  # relative kinetic-energy change an impact may show from round-off (the built-in laws: < 1e-15)
+# after an impact the end may move outward by at most this fraction of its normal speed before it (round-off of the
+# plastic law's sticking rule, which leaves it exactly at 0): a law that leaves it moving outward would make the
+# search find the same impact again at once, every call spinning through its event cap without advancing
+OUTWARD_RTOL = 1e-9
 ARGUMENTS = ("W", "w", "a", "b", "grad2", "e", "Itot", "J", "m")
 
 
@@ -88,7 +96,6 @@ def try_law(name: str, update, e: float, conserves_energy: bool, label: str = "u
     """Call update on every trial_arguments(e): TypeError for a result that is not two real numbers;
     ValueError naming the law and the first offending impact for an exception, a non-finite result, an
     energy gain beyond ENERGY_RTOL, or (conserves_energy) a loss beyond it."""
-    from .validation import is_real
     for args in trial_arguments(e):
         try:
             out = update(*args)
@@ -112,43 +119,20 @@ def try_law(name: str, update, e: float, conserves_energy: bool, label: str = "u
                              f"{before / 2:.6g} J before, {after / 2:.6g} J after (a relative gain of "
                              f"{after / before - 1:.3g}, beyond round-off {ENERGY_RTOL:g}); impact laws must not "
                              "increase the kinetic energy")
+        a, b = args[2], args[3]
+        n_before, n_after = a * W + b * w, a * W1 + b * w1
+        if n_after > OUTWARD_RTOL * n_before:
+            raise ValueError(f"register_law({name!r}): {label} leaves the end moving outward at the impact {_where(args)}: "
+                             f"its normal speed n = a W + b w is {n_before:.6g} before and {n_after:.6g} after; a law "
+                             "must send the end back inside (n+ <= 0), or the penny would cross the wall")
         if conserves_energy and after < before * (1.0 - ENERGY_RTOL):
             raise ValueError(f"register_law({name!r}): conserves_energy=True, but {label} loses kinetic energy at the "
                              f"impact {_where(args)}: {before / 2:.6g} J before, {after / 2:.6g} J after; register it "
                              "with conserves_energy=False (the default)")
 
 
-def try_compiled(name: str, update, e: float, conserves_energy: bool) -> None:
-    """numba compiles update for float64 arguments, as the event loop does, and the compiled function
-    passes :func:`try_law` too; ValueError naming the law and numba's message otherwise. Nothing where
-    numba is not installed (the plain-Python loop then runs the law as it is)."""
-    try:
-        import numba
-        from numba import types
-    except ImportError:
-        return
-    try:
-        compiled = numba.njit(cache=False)(update)
-        compiled.compile((types.float64,) * len(ARGUMENTS))
-    except Exception as exc:  # noqa: BLE001 (numba raises many kinds; all mean "cannot compile")
-        message = numba_message(exc)
-        raise ValueError(f"register_law({name!r}): numba cannot compile update, so the compiled event loop could "
-                         f"not run it ({type(exc).__name__}: {message}); write it as plain math on floats "
-                         "(docs/extending.md)") from None
-    try_law(name, compiled, e, conserves_energy, "update compiled by numba")
-
-
-def numba_message(exc, limit: int = 400) -> str:
-    """The first lines of numba's error, at most ``limit`` characters (numba may print whole values)."""
-    text = " ".join(ln.strip() for ln in str(exc).splitlines() if ln.strip())
-    return text if len(text) <= limit else text[:limit] + " ..."
-
-
-def check_law(name: str, update, e: float, conserves_energy: bool, compile_check: bool = True) -> None:
-    """Every check of the module docstring, in order (signature, plain trials, compiled trials;
-    compile_check False skips the last, for penny_env's own functions, which compile in the package's
-    namespace rather than alone)."""
+def check_law(name: str, update, e: float, conserves_energy: bool) -> None:
+    """The plain-Python checks of the module docstring, in order (signature, trials); the compiled trials are
+    backends/checks.compile_law's."""
     check_signature(name, update)
     try_law(name, update, e, conserves_energy)
-    if compile_check:
-        try_compiled(name, update, e, conserves_energy)

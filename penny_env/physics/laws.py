@@ -23,7 +23,7 @@ Every law moves v along the metric gradient of n, v+ = v - k (a / (I + m R^2), b
 Laws are an open registry: a law is a :class:`LawRecord`, whose map is one function
 ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)`` of the normal form (plain math, so that
 numba compiles it into the event loop), with its Jacobian (or None) and whether it conserves the
-kinetic energy, registered by name with :func:`register_law` (see docs/extending.md);
+kinetic energy, registered by name with ``penny_env.register_law`` (see docs/extending.md);
 ``make_law(name)`` then finds it. The derivatives (physics/sensitivity.py) use the record's Jacobian
 and refuse (jacobian_valid False, with the reason) a law that has none; the event loop's Zeno rule
 (physics/scalar.py) reads conserves_energy.
@@ -38,6 +38,8 @@ import numpy as np
 
 from .flows import PHI, THETA_DOT, PHI_DOT, end_kinematics
 from .kernels import SCALAR, law_update
+from .law_checks import check_law
+from .numbers import is_real
 
 
 def restitution_update(W, w, a, b, grad2, e, Itot, J, m):
@@ -50,15 +52,40 @@ def plastic_update(W, w, a, b, grad2, e, Itot, J, m):
     return law_update(W, w, a, b, grad2, e, True, Itot, J, m, SCALAR)
 
 
+def law_jacobian(W, w, a, b, grad2, e, plastic, Itot, J, m):
+    """(W+, w+) of kernels.law_update and its 2 x 5 Jacobian w.r.t. (W, w, a, b, grad2), on the branch
+    law_update takes (the plastic law's sticking rule included)."""
+    vn = a * W + b * w
+    metric = a * a / Itot + b * b / J
+    dvn = np.array([a, b, W, w, 0.0])
+    dmetric = np.array([0.0, 0.0, 2.0 * a / Itot, 2.0 * b / J, 0.0])
+    if plastic:
+        den = grad2 / m + b * b / J
+        k = 2.0 * vn / den
+        dk = 2.0 * (dvn / den - vn * np.array([0.0, 0.0, 0.0, 2.0 * b / J, 1.0 / m]) / den ** 2)
+        if vn > 0.0 and vn - k * metric > 0.0:  # the end would still move outward: the e = 0 law
+            k = vn / metric
+            dk = dvn / metric - vn * dmetric / metric ** 2
+    else:
+        k = (1.0 + e) * vn / metric
+        dk = (1.0 + e) * (dvn / metric - vn * dmetric / metric ** 2)
+    D = np.zeros((2, 5))
+    D[0] = -(dk * a) / Itot
+    D[0, 0] += 1.0
+    D[0, 2] -= k / Itot
+    D[1] = -(dk * b) / J
+    D[1, 1] += 1.0
+    D[1, 3] -= k / J
+    return (W - k * a / Itot, w - k * b / J), D
+
+
 def restitution_jacobian(W, w, a, b, grad2, e, Itot, J, m):
     """(W+, w+) of restitution_update and its 2 x 5 Jacobian w.r.t. (W, w, a, b, grad2)."""
-    from .sensitivity import law_jacobian
     return law_jacobian(W, w, a, b, grad2, e, False, Itot, J, m)
 
 
 def plastic_jacobian(W, w, a, b, grad2, e, Itot, J, m):
     """(W+, w+) of plastic_update and its 2 x 5 Jacobian (its sticking rule's branch included)."""
-    from .sensitivity import law_jacobian
     return law_jacobian(W, w, a, b, grad2, e, True, Itot, J, m)
 
 
@@ -87,24 +114,18 @@ def is_builtin_law(update) -> bool:
     return getattr(update, "__module__", None) is not None and update.__module__.startswith("penny_env.")
 
 
-def register_law(name: str, update, e: float = 1.0, *, jacobian=None, conserves_energy: bool = False) -> None:
-    """Make ``make_law(name)`` the law whose post-impact velocities are ``update(W, w, a, b, grad2, e,
-    Itot, J, m) -> (W+, w+)`` (W, w: theta_dot, phi_dot before; n = a W + b w the end's outward normal
-    velocity, grad2 = |grad h|^2; Itot = I + m R^2). ``update`` must be plain math (numba compiles it
-    into the event loop) and must not increase the kinetic energy; e is the coefficient it receives
-    (a finite real number).
+def law_record(name: str, update, e: float = 1.0, *, jacobian=None, conserves_energy: bool = False) -> LawRecord:
+    """The LawRecord of a law that passes the plain-Python checks (physics/law_checks.py), before it is
+    registered: ``update(W, w, a, b, grad2, e, Itot, J, m) -> (W+, w+)`` (W, w: theta_dot, phi_dot before;
+    n = a W + b w the end's outward normal velocity, grad2 = |grad h|^2; Itot = I + m R^2) must be plain math
+    (numba compiles it into the event loop), must not increase the kinetic energy and must not leave the end
+    moving outward; e is the coefficient it receives (a finite real number).
     jacobian: ``jacobian(W, w, a, b, grad2, e, Itot, J, m) -> ((W+, w+), D)`` (D: 2 x 5, derivatives
     w.r.t. (W, w, a, b, grad2)) for the sensitivities, or None (they then report jacobian_valid
     False). conserves_energy: True only for a law that keeps the kinetic energy exactly (the event
-    loop then never stops an accumulation of impacts).
-
-    The law is tried before it is accepted (physics/law_checks.py): a wrong signature, a result that is
-    not two real numbers (TypeError), an exception, a non-finite result or an energy gain on typical
-    impacts, or a function numba cannot compile (ValueError) are refused with a message naming the law.
-    Registering a name again replaces its law for everything built afterwards (make_law, simulate, the
-    batch API, new environments; the compiled code is built anew), with a UserWarning: environments and
-    batches built before keep the law they were built with. The built-in names (BUILTIN_LAWS) cannot
-    be replaced."""
+    loop then never stops an accumulation of impacts). TypeError / ValueError naming the law otherwise; the
+    built-in names (BUILTIN_LAWS) are refused. Users register laws with ``penny_env.register_law``, which
+    also compiles the law (backends/checks.py) and then calls :func:`add_law`."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"register_law: name must be an identifier, got {name!r}")
     if not callable(update):
@@ -113,7 +134,6 @@ def register_law(name: str, update, e: float = 1.0, *, jacobian=None, conserves_
         raise TypeError("register_law: jacobian must be a function or None")
     if not isinstance(conserves_energy, bool):
         raise TypeError(f"register_law: conserves_energy must be a bool, got {type(conserves_energy).__name__}")
-    from .validation import is_real
     if not is_real(e):
         raise TypeError(f"register_law({name!r}): e must be a real number, got {type(e).__name__} {e!r}")
     if not math.isfinite(float(e)):
@@ -121,16 +141,22 @@ def register_law(name: str, update, e: float = 1.0, *, jacobian=None, conserves_
     if name.strip().lower() in BUILTIN_LAWS and not is_builtin_law(update):
         raise ValueError(f"register_law: {name!r} is a built-in law and cannot be replaced (every environment id "
                          "runs it); register yours under another name")
-    from .law_checks import check_law
-    check_law(name, update, float(e), conserves_energy, compile_check=not is_builtin_law(update))
-    record = LawRecord(name, update, float(e), jacobian, conserves_energy)
-    old = LAW_KINDS.get(name)
+    check_law(name, update, float(e), conserves_energy)
+    return LawRecord(name, update, float(e), jacobian, conserves_energy)
+
+
+def add_law(record: LawRecord) -> None:
+    """Make ``make_law(record.name)`` the law of a record that :func:`law_record` made. Registering a name again
+    replaces its law for everything built afterwards (make_law, simulate, the batch API, new environments; the
+    compiled code is built anew), with a UserWarning: environments and batches built before keep the law they
+    were built with."""
+    old = LAW_KINDS.get(record.name)
     _register(record)
     if old is not None and old != record:
         import warnings
-        warnings.warn(f"register_law: {name!r} now names the new law for everything built from here on; environments "
-                      "and batches built before keep the law they were built with (build them again)", UserWarning,
-                      stacklevel=2)
+        warnings.warn(f"register_law: {record.name!r} now names the new law for everything built from here on; "
+                      "environments and batches built before keep the law they were built with (build them again)",
+                      UserWarning, stacklevel=3)
 
 
 def _register(record: LawRecord) -> None:
@@ -155,7 +181,7 @@ def builtin_law_indices() -> tuple:
     return tuple(k for k, f in enumerate(COMPILED_LAWS) if is_builtin_law(f))
 
 
-# (penny_env's own laws: registered without the trials, which tests/test_law_checks.py runs on them)
+# (penny_env's own laws: registered without the trials, which tests/physics/test_law_checks.py runs on them)
 _register(LawRecord("elastic", restitution_update, 1.0, restitution_jacobian, True))
 _register(LawRecord("restitution", restitution_update, 1.0, restitution_jacobian))  # (e = 1 is "elastic")
 _register(LawRecord("plastic", plastic_update, 0.0, plastic_jacobian))

@@ -3,7 +3,7 @@
 States are 6-tuples (x, y, theta, phi, theta_dot, phi_dot). Everything a penny needs travels in a
 :class:`Model` of plain numbers (the table's formula index and constants, the law's index and
 coefficient included), so backends/physics.py compiles these very functions (and runs them in
-parallel over the pennies of a batch, physics/pennies.py); in plain Python they run as they are,
+parallel over the pennies of a batch, backends/pennies.py); in plain Python they run as they are,
 the readable reference the tests compare the compiled loop with, bitwise.
 
 Impact search (:func:`first_impact_search`). For an end p(t), g(t) = h(p(t)) is the wall function along
@@ -38,7 +38,8 @@ from typing import NamedTuple
 
 from .flows import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_COUNTS, RULE_LIMITS, RULE_NODES,
                    RULE_WEIGHTS, phase_sweep)
-from .law_checks import ENERGY_RTOL
+from .faults import FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, FAULT_OUTSIDE, FAULT_OUTWARD, OUTSIDE_TOL, fault_error
+from .law_checks import ENERGY_RTOL, OUTWARD_RTOL
 from .laws import COMPILED_LAWS, law_index
 from .tables.base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind
 from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step,
@@ -167,8 +168,6 @@ def table_constants(table):
     return kind, c + (0.0,) * (N_CONSTANTS - len(c))
 
 
-OUTSIDE_TOL = 1e-8  # [table sizes] an end found farther outside the wall at an impact is a fault (FAULT_OUTSIDE):
-# 10 times what validation.check_inside lets a given state have, about 10^6 times the search's own penetration
 SEARCH_SPEED2_FLOOR = 1e-290  # [m^2/s^2] below this squared end speed the certificate's squares leave float64's
 # normal range (a plastic penny wedged in a table 1.0001 R wide decays to 1e-159 rad/s): the search's penetrations
 # are then underflow, not false bounds, and the guard does not judge them (relocate_inside repairs them, as before)
@@ -389,19 +388,22 @@ def relocate_measured(s, m):
 
 
 # -- the run-time guard: faults the event loop records (ImpactBuffers.fault) rather than raising in compiled code
-FAULT_NONE, FAULT_NONFINITE, FAULT_ENERGY, FAULT_OUTSIDE = 0, 1, 2, 3  # (names: physics/faults.py)
 
 
-def law_fault(pre, post, m):
+def law_fault(pre, post, n_pre, n_post, m):
     """FAULT_NONFINITE if the law gave a non-finite velocity, FAULT_ENERGY if it added kinetic energy beyond
-    round-off (laws.ENERGY_RTOL; no law may add any), else FAULT_NONE. Only at impacts: the hot path of
-    impact-free steps never pays for it."""
+    round-off (laws.ENERGY_RTOL; no law may add any), FAULT_OUTWARD if it left the end moving outward (its normal
+    speed n_post beyond OUTWARD_RTOL of n_pre, the one before: the search would find the same impact at once,
+    the call spinning through its event cap), else FAULT_NONE. Only at impacts: the hot path of impact-free
+    steps never pays for it."""
     W, w = post[4], post[5]
     if not (math.isfinite(W) and math.isfinite(w)):
         return FAULT_NONFINITE
     before = m.Itot * (pre[4] * pre[4]) + m.J * (pre[5] * pre[5])
     if m.Itot * (W * W) + m.J * (w * w) > before * (1.0 + ENERGY_RTOL):
         return FAULT_ENERGY
+    if n_post > OUTWARD_RTOL * n_pre:
+        return FAULT_OUTWARD
     return FAULT_NONE
 
 
@@ -411,7 +413,7 @@ def record_fault(buf, row, code):
 
 
 def law_at_end(s, sigma, m):
-    """Post-impact state of end sigma (see laws.apply_law)."""
+    """(post-impact state of end sigma (see laws.apply_law), the end's normal speed a W + b w before and after)."""
     R = m.R
     px, py, _, _ = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
     _, hx, hy = wall_terms(m, px, py)
@@ -419,7 +421,7 @@ def law_at_end(s, sigma, m):
     a = R * (hx * c + hy * sn)
     b = sigma * R * (hy * c - hx * sn)
     W, w = law_terms(m, s[4], s[5], a, b, hx * hx + hy * hy)
-    return (s[0], s[1], s[2], s[3], W, w)
+    return (s[0], s[1], s[2], s[3], W, w), a * s[4] + b * s[5], a * W + b * w
 
 
 def controls_push_out(s, acc1, acc2, m, delta):
@@ -533,8 +535,9 @@ def advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
 
     The run-time guard (the impacts only) stops the call at an impact, recording a FAULT_* in buf.fault:
     FAULT_OUTSIDE with the state where an end was found more than m.outside_tol outside the wall (the
-    table's bounds or formulas are false), FAULT_NONFINITE / FAULT_ENERGY with the state right before the
-    impact whose law gave a non-finite velocity or added energy (:func:`law_fault`). elapsed is then the
+    table's bounds or formulas are false), FAULT_NONFINITE / FAULT_ENERGY / FAULT_OUTWARD with the state right
+    before the impact whose law gave a non-finite velocity, added energy or left the end moving outward
+    (:func:`law_fault`). elapsed is then the
     impact's time. The motion up to there is the one without the guard.
 
     Only an accumulation brings a penny to rest: m.zeno_impacts consecutive impacts each closer
@@ -565,8 +568,8 @@ def advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
             s = pre
             elapsed += t_hit
             continue
-        post = law_at_end(pre, float(end), m)
-        fault = law_fault(pre, post, m)
+        post, n_pre, n_post = law_at_end(pre, float(end), m)
+        fault = law_fault(pre, post, n_pre, n_post, m)
         if fault != FAULT_NONE:  # the law broke its contract: stop at the impact, before it (the caller reports it)
             record_fault(buf, row, fault)
             return pre, elapsed + t_hit
@@ -652,7 +655,6 @@ def _with_lists(run, capacity, law=None, table=None):
         buf = impact_buffers(1, int(buf.count[0]))
         s, elapsed = run(buf)
     if buf.fault[0] != FAULT_NONE:  # the run-time guard stopped the call (physics/faults.py)
-        from .faults import fault_error
         raise fault_error(buf.fault[0], law, table, where=f"t = {elapsed:.6g} s")
     impacts, rests = impacts_of(buf, 0)
     return s, impacts, rests, elapsed

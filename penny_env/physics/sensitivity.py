@@ -10,7 +10,7 @@ flows between impacts and control boundaries) and chains exact linearisations:
   k = 0..3 (:func:`phase_moments`: composite Gauss-Legendre, 24 nodes per panel of <= 3 rad);
 * an impact of end sigma: the saltation matrix
   Xi = D Delta + (f+ - D Delta f-) (grad g)^T / (grad g . f-), g(s) = h(end(s)), D Delta the
-  Jacobian of the impact law (:func:`law_jacobian`, the sticking rule of the plastic law
+  Jacobian of the impact law (laws.law_jacobian, the sticking rule of the plastic law
   included) and f-, f+ the vector field before and after;
 * a control boundary: nothing (its time does not move).
 
@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 
@@ -147,33 +148,6 @@ def vector_field(state, acc1, acc2, R):
     """ds/dt at a state under constant angular accelerations."""
     W, w, ph = state[THETA_DOT], state[PHI_DOT], state[PHI]
     return np.array([R * W * math.cos(ph), R * W * math.sin(ph), W, w, acc2, acc1])
-
-
-def law_jacobian(W, w, a, b, grad2, e, plastic, Itot, J, m):
-    """(W+, w+) of kernels.law_update and its 2 x 5 Jacobian w.r.t. (W, w, a, b, grad2), on the branch
-    law_update takes (the plastic law's sticking rule included)."""
-    vn = a * W + b * w
-    metric = a * a / Itot + b * b / J
-    dvn = np.array([a, b, W, w, 0.0])
-    dmetric = np.array([0.0, 0.0, 2.0 * a / Itot, 2.0 * b / J, 0.0])
-    if plastic:
-        den = grad2 / m + b * b / J
-        k = 2.0 * vn / den
-        dk = 2.0 * (dvn / den - vn * np.array([0.0, 0.0, 0.0, 2.0 * b / J, 1.0 / m]) / den ** 2)
-        if vn > 0.0 and vn - k * metric > 0.0:  # the end would still move outward: the e = 0 law
-            k = vn / metric
-            dk = dvn / metric - vn * dmetric / metric ** 2
-    else:
-        k = (1.0 + e) * vn / metric
-        dk = (1.0 + e) * (dvn / metric - vn * dmetric / metric ** 2)
-    D = np.zeros((2, 5))
-    D[0] = -(dk * a) / Itot
-    D[0, 0] += 1.0
-    D[0, 2] -= k / Itot
-    D[1] = -(dk * b) / J
-    D[1, 1] += 1.0
-    D[1, 3] -= k / J
-    return (W - k * a / Itot, w - k * b / J), D
 
 
 def wall_hessian(table, px, py):

@@ -8,58 +8,17 @@ input goes through :func:`real` or :func:`real_array`, which check the type firs
 """
 from __future__ import annotations
 
-import math
-import numbers
 
 import numpy as np
 
 from .flows import end_kinematics
 from .params import (DEFAULT_SETTINGS, MAX_ANGULAR_SPEED, MAX_CONTROL_DT, MAX_STEERED_PHASE, MIN_GAP,
                      PennyParams, SolverSettings)
+from .numbers import _positive, is_real, positive_count, positive_time, real, real_array  # noqa: F401 (re-exported)
 from .tables import as_table
 from .tables.registered import check_registered
 
 STATE_FIELDS = ("x", "y", "theta", "phi", "theta_dot", "phi_dot")
-
-
-def is_real(value) -> bool:
-    """A real number of a numeric type: int, float or a numpy integer/float scalar (not bool)."""
-    return (isinstance(value, (numbers.Real, np.integer, np.floating))
-            and not isinstance(value, (bool, np.bool_)))
-
-
-def real(value, name: str) -> float:
-    """value as a finite float, or TypeError (not a real number) / ValueError (not finite) naming name."""
-    if not is_real(value):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return value
-
-
-def real_array(value, name: str, what: str) -> np.ndarray:
-    """A float64 copy of an array-like of real numbers (ints or floats, not bools, strings,
-    complex numbers or None), or a TypeError naming name; what describes the expected shape."""
-    if isinstance(value, (str, bytes)) or value is None:
-        raise TypeError(f"{name} must be {what}, got {type(value).__name__}")
-    if not isinstance(value, np.ndarray):
-        # nested sequences: numpy would turn [True, 0] into ints and ["1.5"] into floats, so look at each entry
-        try:
-            entries = np.asarray(value, dtype=object)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be {what} (ragged or unreadable input)") from None
-        for v in entries.flat:
-            if not is_real(v):
-                raise TypeError(f"{name} must be {what} of real numbers, got an entry of type {type(v).__name__}")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {what} (ragged or unreadable input)") from None
-    if arr.dtype.kind not in "iuf":
-        kind = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "strings", "O": "non-numeric entries"}
-        raise TypeError(f"{name} must be {what} of real numbers, got {kind.get(arr.dtype.kind, arr.dtype.name)}")
-    return np.array(arr, dtype=float)
 
 
 def as_state(state, name: str = "state") -> np.ndarray:
@@ -160,7 +119,7 @@ def step_speed_limits(params: PennyParams, u1_max: float, u2_max: float, control
     torque limits stays within the documented limits (MAX_ANGULAR_SPEED for both speeds, and
     MAX_STEERED_PHASE of heading swept when there is a steering torque). The environments check a
     scene's initial speeds against them and end an episode, truncated, once a state passes them
-    (envs/functional.py), so every step they run is one the physics accepts. u1_max = 0: no steering
+    (step/functional.py), so every step they run is one the physics accepts. u1_max = 0: no steering
     torque (the heading's phase is then not limited: the flow is in closed form)."""
     W_max = MAX_ANGULAR_SPEED - u2_max * control_dt / params.rolling_inertia
     w_reach = MAX_ANGULAR_SPEED if u1_max == 0.0 else min(MAX_ANGULAR_SPEED, MAX_STEERED_PHASE / control_dt)
@@ -230,24 +189,3 @@ def check_controls(controls, control_dt, n_controls: int = 2):
         raise ValueError("control_dt is required when controls are given")
     dt = _positive(control_dt, "control_dt")
     return u, dt
-
-
-def _positive(value, name: str) -> float:
-    if not is_real(value):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    value = float(value)
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return value
-
-
-def positive_time(value, name: str) -> float:
-    return _positive(value, name)
-
-
-def positive_count(value, name: str) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"{name} must be >= 1, got {value}")
-    return int(value)

@@ -1412,8 +1412,8 @@ def build_D(do_checks, log):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[1])
-    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "penny_env",
-                                                 "analysis", "reference_data"))
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "studies",
+                                                 "reference_data"))
     ap.add_argument("--skip-checks", action="store_true", help="skip the (slower) cross-checks")
     ap.add_argument("--only", default="ABCDE")
     args = ap.parse_args()

@@ -19,7 +19,7 @@ Like make_reference.py, nothing here imports penny_env: the float64 sensitivitie
 (penny_env/physics/sensitivity.py) are checked against an independent computation.
 
 Usage:  python tests/reference/make_sensitivity_reference.py [--out FILE] [--only N]
-Writes penny_env/analysis/reference_data/sensitivity_cases.json (a few minutes on one core).
+Writes studies/reference_data/sensitivity_cases.json (a few minutes on one core).
 """
 
 import argparse
@@ -140,7 +140,7 @@ def jacobians(case):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir, os.pardir,
-                                                  "penny_env", "analysis", "reference_data", "sensitivity_cases.json"))
+                                                  "studies", "reference_data", "sensitivity_cases.json"))
     ap.add_argument("--only", type=int, default=None, help="compute only case N (for timing)")
     args = ap.parse_args()
     defs = case_defs()

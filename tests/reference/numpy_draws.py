@@ -1,6 +1,6 @@
 """The episodes' draws as penny_env computed them before 2026-11-26: numpy, vectorised over envs
 (envs/core.py's Core.sample of commit 933b537, kept here as an independent implementation). The per-env
-stages that replaced it (envs/functional.initial_state, envs/tasks/) must draw the very same bits:
+stages that replaced it (step/functional.initial_state, step/tasks/) must draw the very same bits:
 tests/test_draws.py compares them on every preset."""
 import numpy as np
 

@@ -2,7 +2,7 @@
 module per shape. See docs/extending.md to add one."""
 from __future__ import annotations
 
-from .base import TABLE_KINDS, Table, register_table
+from .base import TABLE_KINDS, Table, add_table, check_table_class
 # not in __all__, still imported from here: the compiled builds' formulas and dispatch (backends/physics.py,
 # backends/choice.py, the tests) and N_CONSTANTS (how many constants a compiled formula receives)
 from .base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind  # noqa: F401
@@ -12,7 +12,7 @@ from .stadium import Stadium
 from .rounded_rectangle import RoundedRectangle
 
 __all__ = ["Table", "Ellipse", "Circle", "Stadium", "RoundedRectangle", "ConvexTable", "ProtocolTable",
-           "register_table", "make_table", "as_table", "TABLE_KINDS", "PROTOCOL", "check_on_grid"]
+           "add_table", "check_table_class", "make_table", "as_table", "TABLE_KINDS", "PROTOCOL", "check_on_grid"]
 
 
 def as_table(table) -> Table | None:

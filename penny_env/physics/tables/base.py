@@ -27,7 +27,7 @@ The built-in tables scale h to have |grad h| = 1 on (part of) the wall, so h is 
 A built-in table shape is one module of this package: its class (a :class:`Table`) with the
 formulas the compiled event loop calls, ``terms(c, x, y) -> (h, hx, hy)`` and
 ``hess(c, x, y) -> (hxx, hxy, hyy)`` (plain-math static functions that numba compiles; ``c`` is
-the tuple :meth:`Table.constants`), and one :func:`register_table` call (see docs/extending.md).
+the tuple :meth:`Table.constants`), and one ``penny_env.register_table`` call (see docs/extending.md).
 """
 from __future__ import annotations
 
@@ -144,18 +144,11 @@ TABLE_KINDS: dict = {}      # name -> class (the "kind" of a table spec)
 COMPILED_FORMULAS: list = []  # (terms, hess, ray or None) of the compiled tables; Model.kind indexes it
 
 
-def register_table(name: str, cls) -> None:
-    """Make ``make_table({"kind": name, ...})`` (and scene YAML ``table: {kind: name, ...}``) build
-    ``cls(...)``; a class with static ``terms`` and ``hess`` also runs in the compiled event loop (and
-    ``ray(c, cos, sin)``, optional, gives the distance from the centre to the wall along a direction; without
-    it the compiled code bisects on terms' h).
-
-    The formulas are tried first (tables/registered.py): their signature ``(c, x, y)`` and, where numba
-    is installed, that numba compiles them (TypeError / ValueError naming the class otherwise); each
-    instance is then checked on a grid before a penny rolls on it (validation.check_table: the formulas
-    against its own h, grad and hessian, its bounds and shape as a ConvexTable's). Registering a name
-    again replaces the class for every table built afterwards, with a UserWarning; the names of
-    penny_env's own shapes cannot be taken by another class."""
+def check_table_class(name: str, cls) -> None:
+    """The checks of a table class before it is registered (plain Python; penny_env.register_table adds the
+    compiled ones, backends/checks.py): a name that is an identifier and not the plane's; a class; not one of
+    penny_env's own names for another class; ``terms`` with ``hess``, both taking ``(c, x, y)``
+    (tables/registered.check_formula_signatures). TypeError / ValueError naming the class otherwise."""
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"register_table: name must be an identifier, got {name!r}")
     if name in ("none", "plane"):
@@ -163,23 +156,55 @@ def register_table(name: str, cls) -> None:
     if not isinstance(cls, type):
         raise TypeError(f"register_table: cls must be a class, got {type(cls).__name__}")
     old = TABLE_KINDS.get(name)
-    own = cls.__module__.startswith("penny_env.")
-    if old is not None and old.__module__.startswith("penny_env.") and not own:
+    if old is not None and is_own(old) and not is_own(cls):
         raise ValueError(f"register_table: {name!r} is one of penny_env's own table shapes and cannot be replaced "
                          "(environment ids use it); register yours under another name")
     if cls.terms is not None:
         if cls.hess is None:
             raise ValueError(f"register_table: {cls.__name__} defines terms but not hess")
-        if not own:
-            from .registered import check_formulas_compile
-            check_formulas_compile(cls)
+        check_formula_signatures(cls)
+
+
+def check_formula_signatures(cls) -> None:
+    """TypeError unless cls.terms and cls.hess are functions taking (c, x, y)."""
+    import inspect
+    for label in ("terms", "hess"):
+        f = getattr(cls, label)
+        if not callable(f):
+            raise TypeError(f"register_table: {cls.__name__}.{label} must be a function (a staticmethod of (c, x, y)), "
+                            f"got {type(f).__name__}")
+        try:
+            sig = inspect.signature(f)
+        except (TypeError, ValueError):
+            continue
+        try:
+            sig.bind("c", "x", "y")
+        except TypeError:
+            raise TypeError(f"register_table: {cls.__name__}.{label} must take (c, x, y) (a staticmethod: c the table's "
+                            f"constants()); its signature is {sig}") from None
+
+
+def is_own(cls) -> bool:
+    """cls is one of penny_env's own shapes (tested in the suite; compiled in the package's namespace)."""
+    return cls.__module__.startswith("penny_env.")
+
+
+def add_table(name: str, cls) -> None:
+    """Make ``make_table({"kind": name, ...})`` (and scene YAML ``table: {kind: name, ...}``) build ``cls(...)``
+    once :func:`check_table_class` accepts it; a class with static ``terms`` and ``hess`` also runs in the
+    compiled event loop (and ``ray(c, cos, sin)``, optional, gives the distance from the centre to the wall
+    along a direction; without it the compiled code bisects on terms' h). Users register shapes with
+    ``penny_env.register_table``, which also tries the compiled formulas (backends/checks.py). Registering a name
+    again replaces the class for every table built afterwards, with a UserWarning."""
+    check_table_class(name, cls)
+    old = TABLE_KINDS.get(name)
     TABLE_KINDS[name] = cls
     if cls.terms is not None and compiled_kind(cls) < 0:
         COMPILED_FORMULAS.append((cls.terms, cls.hess, getattr(cls, "ray", None)))
     if old is not None and old is not cls:
         import warnings
         warnings.warn(f"register_table: {name!r} now builds {cls.__name__}; tables, environments and batches built "
-                      "before keep the class they were built with", UserWarning, stacklevel=2)
+                      "before keep the class they were built with", UserWarning, stacklevel=3)
 
 
 def compiled_kind(table_or_cls) -> int:

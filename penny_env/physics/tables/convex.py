@@ -155,7 +155,7 @@ class ConvexTable(Table):
     inradius : radius of an inscribed disk; estimated from the grid (a lower bound) if omitted.
 
     Example: a rounded square ``h = (x**4 + y**4 - s**4) / (4 s**3)`` with
-    ``grad = (x**3/s**3, y**3/s**3)`` (tests/test_tables.py builds and checks it).
+    ``grad = (x**3/s**3, y**3/s**3)`` (tests/physics/test_tables.py builds and checks it).
     """
 
     name = "custom"

@@ -6,7 +6,7 @@ import warnings
 
 import numpy as np
 
-from .base import Table, length, register_table
+from .base import Table, length, add_table
 
 
 def ellipse_terms(c, x, y):
@@ -111,5 +111,5 @@ class Circle(Ellipse):
         return {"radius": self.radius}
 
 
-register_table("ellipse", Ellipse)
-register_table("circle", Circle)
+add_table("ellipse", Ellipse)
+add_table("circle", Circle)

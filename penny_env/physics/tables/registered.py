@@ -1,21 +1,20 @@
-"""Checks of a table shape registered from outside the package (register_table): its compiled formulas are
+"""Checks of a table shape registered from outside the package (penny_env.register_table): its formulas are
 what the event loop runs, so they are held to what a ConvexTable is held to.
 
-* At registration (:func:`check_formulas_compile`): ``terms`` and ``hess`` take ``(c, x, y)``, and numba
-  compiles them for the arguments the event loop passes (c: N_CONSTANTS float64; x, y: float64), returning
-  three numbers. TypeError / ValueError naming the class otherwise.
+* At registration (tables/base.check_table_class): ``terms`` and ``hess`` take ``(c, x, y)``; numba compiles
+  them (backends/checks.py, called by penny_env.register_table).
 * Per instance, before a penny rolls on it (:func:`check_registered`, called by validation.check_table, once
-  per distinct table): on a grid over its extent, ``terms`` (as written and as numba compiles it) against
-  its own ``h`` and ``grad``, ``hess`` against its ``hessian`` where it has one; then the bounds, the
-  extent, the convexity and the inradius by tables.convex.check_on_grid, as a ConvexTable's. One wrong
-  factor in a formula let pennies leave the table by 1.3 to 33 mm before this check.
+  per distinct table): on a grid over its extent, ``terms`` against its own ``h`` and ``grad``, ``hess``
+  against its ``hessian`` where it has one (:func:`check_formulas_on_grid`; the compiled copies are compared
+  too where a compiled backend runs the table, backends/checks.py); then the bounds, the extent, the convexity
+  and the inradius by tables.convex.check_on_grid, as a ConvexTable's. One wrong factor in a formula let
+  pennies leave the table by 1.3 to 33 mm before this check.
 
 A grid cannot prove a bound: bounds that hold on the grid but not between its points are caught at run
 time by the event loop's guard (an end found outside the wall, physics/faults.py).
 """
 from __future__ import annotations
 
-import inspect
 import math
 import weakref
 
@@ -25,53 +24,7 @@ from .base import N_CONSTANTS
 
 GRID = 41          # points per axis of the formulas' comparison (check_on_grid then uses its own 97)
 FORMULA_RTOL = 1e-9  # formulas vs methods, relative to the largest |h|, |grad h|, |Hessian| on the grid
-_COMPILED: dict = {}  # class -> (terms, hess) compiled by numba at registration (None without numba)
 _CHECKED = weakref.WeakKeyDictionary()  # table -> True: the tables already checked (tables hash by value)
-
-
-def _owner(cls) -> str:
-    return f"register_table: {cls.__name__}"
-
-
-def check_formulas_compile(cls) -> None:
-    """TypeError unless cls.terms and cls.hess take (c, x, y); ValueError naming the class and numba's
-    message where numba cannot compile them for (N_CONSTANTS float64, float64, float64) or they do not
-    return three numbers."""
-    for label in ("terms", "hess"):
-        f = getattr(cls, label)
-        if not callable(f):
-            raise TypeError(f"{_owner(cls)}.{label} must be a function (a staticmethod of (c, x, y)), got {type(f).__name__}")
-        try:
-            sig = inspect.signature(f)
-        except (TypeError, ValueError):
-            continue
-        try:
-            sig.bind("c", "x", "y")
-        except TypeError:
-            raise TypeError(f"{_owner(cls)}.{label} must take (c, x, y) (a staticmethod: c the table's constants()); "
-                            f"its signature is {sig}") from None
-    try:
-        import numba
-        from numba import types
-    except ImportError:
-        _COMPILED[cls] = None
-        return
-    arg = (types.UniTuple(types.float64, N_CONSTANTS), types.float64, types.float64)
-    out = []
-    for label in ("terms", "hess"):
-        try:
-            f = numba.njit(cache=False)(getattr(cls, label))
-            f.compile(arg)
-        except Exception as exc:  # noqa: BLE001 (numba raises many kinds; all mean "cannot compile")
-            from ..law_checks import numba_message
-            raise ValueError(f"{_owner(cls)}.{label}: numba cannot compile it, so the compiled event loop could not run "
-                             f"this table ({type(exc).__name__}: {numba_message(exc)}); write it as plain math on "
-                             "floats (docs/extending.md)") from None
-        ret = f.nopython_signatures[0].return_type
-        if not (isinstance(ret, types.BaseTuple) and len(ret) == 3 and all(isinstance(t, types.Number) for t in ret)):
-            raise ValueError(f"{_owner(cls)}.{label} must return three numbers, numba types its result as {ret}")
-        out.append(f)
-    _COMPILED[cls] = tuple(out)
 
 
 def _pointwise(f, c, X, Y):
@@ -102,6 +55,37 @@ def _compare_row(owner, label, got, want, name, scale, X, Y) -> None:
                      "(the table's h, grad, hessian), which the checks and the renderer use")
 
 
+def grid(table):
+    """(c, X, Y): the table's constants padded to N_CONSTANTS, and the GRID x GRID comparison grid over its extent."""
+    c = tuple(float(v) for v in table.constants())
+    c = c + (0.0,) * (N_CONSTANTS - len(c))
+    xmin, xmax, ymin, ymax = (float(v) for v in table.extent)
+    X, Y = np.meshgrid(np.linspace(xmin, xmax, GRID), np.linspace(ymin, ymax, GRID))
+    return c, X, Y
+
+
+def owner_of(table) -> str:
+    return f"table {getattr(table, 'name', type(table).__name__)!s} ({type(table).__name__})"
+
+
+def check_formulas_on_grid(table, terms, hess, how: str) -> None:
+    """``terms`` (and ``hess`` where the table has a ``hessian``) against the table's own h, grad (and hessian)
+    on the comparison grid; ValueError naming the table and the first point where they differ. ``how``: how the
+    formulas were made (" (compiled by numba)", for backends/checks.py), in the message."""
+    owner = owner_of(table)
+    c, X, Y = grid(table)
+    with np.errstate(all="ignore"):
+        H = np.asarray(table.h(X, Y), dtype=float) * np.ones_like(X)
+        gx, gy = (np.asarray(g, dtype=float) * np.ones_like(X) for g in table.grad(X, Y))
+    _compare(owner, "terms" + how, _pointwise(terms, c, X, Y), np.stack([H, gx, gy]), ("h", "dh/dx", "dh/dy"),
+             ((0,), (1, 2)), X, Y)
+    hessian = getattr(table, "hessian", None)
+    if callable(hessian):
+        with np.errstate(all="ignore"):
+            want_h = np.stack([np.asarray(v, dtype=float) * np.ones_like(X) for v in hessian(X, Y)])
+        _compare(owner, "hess" + how, _pointwise(hess, c, X, Y), want_h, ("hxx", "hxy", "hyy"), ((0, 1, 2),), X, Y)
+
+
 def check_registered(table) -> None:
     """The per-instance checks of the module docstring; ValueError naming the table and the check. Only for a
     registered class from outside penny_env with formulas (penny_env's own shapes are tested in the suite),
@@ -116,26 +100,10 @@ def check_registered(table) -> None:
             return
     except TypeError:  # an unhashable table: checked every time
         pass
-    owner = f"table {getattr(table, 'name', cls.__name__)!s} ({cls.__name__})"
-    c = tuple(float(v) for v in table.constants())
-    c = c + (0.0,) * (N_CONSTANTS - len(c))
+    owner = owner_of(table)
     xmin, xmax, ymin, ymax = (float(v) for v in table.extent)
-    X, Y = np.meshgrid(np.linspace(xmin, xmax, GRID), np.linspace(ymin, ymax, GRID))
-    with np.errstate(all="ignore"):
-        H = np.asarray(table.h(X, Y), dtype=float) * np.ones_like(X)
-        gx, gy = (np.asarray(g, dtype=float) * np.ones_like(X) for g in table.grad(X, Y))
-    want = np.stack([H, gx, gy])
-    compiled = _COMPILED.get(cls)
-    versions = [("terms", cls.terms)] + ([("terms (compiled by numba)", compiled[0])] if compiled else [])
-    for label, f in versions:
-        _compare(owner, label, _pointwise(f, c, X, Y), want, ("h", "dh/dx", "dh/dy"), ((0,), (1, 2)), X, Y)
+    check_formulas_on_grid(table, cls.terms, cls.hess, "")
     hessian = getattr(table, "hessian", None)
-    if callable(hessian):
-        with np.errstate(all="ignore"):
-            want_h = np.stack([np.asarray(v, dtype=float) * np.ones_like(X) for v in hessian(X, Y)])
-        hv = [("hess", cls.hess)] + ([("hess (compiled by numba)", compiled[1])] if compiled else [])
-        for label, f in hv:
-            _compare(owner, label, _pointwise(f, c, X, Y), want_h, ("hxx", "hxy", "hyy"), ((0, 1, 2),), X, Y)
     check_on_grid(owner, table.h, table.grad, float(table.grad_bound), float(table.hessian_bound), (xmin, xmax, ymin, ymax),
                   inradius=float(table.inradius), hessian=hessian if callable(hessian) else None, edge_may_touch=True)
     if not math.isfinite(float(getattr(table, "third_derivative_bound", 0.0))):

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .base import Table, length, register_table
+from .base import Table, length, add_table
 
 
 def rounded_rectangle_terms(c, x, y):
@@ -123,4 +123,4 @@ class RoundedRectangle(Table):
         return np.concatenate(pts, axis=0)
 
 
-register_table("rounded_rectangle", RoundedRectangle)
+add_table("rounded_rectangle", RoundedRectangle)

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .base import Table, length as _length, register_table
+from .base import Table, length as _length, add_table
 
 
 def stadium_terms(c, x, y):
@@ -100,4 +100,4 @@ class Stadium(Table):
         return np.concatenate([right, left, right[:1]], axis=0)
 
 
-register_table("stadium", Stadium)
+add_table("stadium", Stadium)

@@ -1,0 +1,147 @@
+"""Shared helpers of the report commands: machine description, timing, progress bars, Markdown."""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import platform
+import shlex
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def _version(module: str) -> str:
+    try:
+        from importlib.metadata import version
+        return version(module)
+    except Exception:  # not installed
+        return "not installed"
+
+
+def load_line() -> str:
+    """The machine's load averages when the report's header is made (most commands make it at the
+    end of their run, so the 5-minute average covers the run): timings taken beside other work are
+    slower."""
+    try:
+        one, five, _ = os.getloadavg()
+    except OSError:  # (not available on this platform)
+        return "- load when this header was written: unknown"
+    return (f"- load when this header was written: {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} "
+            "logical cores; timings taken under load are slower than on a quiet machine")
+
+
+def machine_lines() -> list[str]:
+    return [
+        f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
+        f"- Python {platform.python_version()}, numpy {np.__version__}, scipy {_version('scipy')}",
+        f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
+        load_line(),
+    ]
+
+
+def command_line(module: str, argv: list[str]) -> str:
+    return "python -m " + module + ("" if not argv else " " + " ".join(shlex.quote(a) for a in argv))
+
+
+def header(title: str, module: str, argv: list[str]) -> list[str]:
+    """A report's first lines: title, machine, command and (for the committed reports) the hash of
+    the sources that make its numbers (analysis/provenance.py)."""
+    from studies.provenance import MODULE_REPORTS, stamp_line
+
+    sources = [stamp_line(MODULE_REPORTS[module])] if module in MODULE_REPORTS else []
+    return [f"# {title}", "", *machine_lines(), f"- command: `{command_line(module, argv)}`",
+            "- regenerate: run the command above from the repository root", *sources, ""]
+
+
+def best_time(fn, repeats: int = 3, min_total: float = 0.0, warmup: bool = True):
+    """(best wall time of fn() over repeats, last result); repeats continue until min_total s were spent.
+    warmup: one unmeasured call first (imports, caches)."""
+    if warmup:
+        fn()
+    best = math.inf
+    result = None
+    total = 0.0
+    k = 0
+    while k < repeats or total < min_total:
+        t0 = time.perf_counter()
+        result = fn()
+        dt = time.perf_counter() - t0
+        best = min(best, dt)
+        total += dt
+        k += 1
+        if k >= 50:
+            break
+    return best, result
+
+
+def progress(iterable, desc: str = "", total=None, disable=None):
+    """tqdm progress bar on a TTY (stderr), plain iteration otherwise."""
+    if disable is None:
+        disable = not sys.stderr.isatty()
+    try:
+        from tqdm import tqdm
+    except ImportError:  # tqdm is in the [train] and [bench] extras: without it, no bar
+        return iterable
+    return tqdm(iterable, desc=desc, total=total, disable=disable, leave=False)
+
+
+def fmt(x, digits: int = 2) -> str:
+    """Compact number for tables: 1.2e-09, 0.35, nan -> '-'."""
+    if x is None:
+        return "-"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    x = float(x)
+    if math.isnan(x):
+        return "-"
+    if math.isinf(x):
+        return "inf"
+    if x == 0:
+        return "0"
+    if 1e-3 <= abs(x) < 1e4:
+        return f"{x:.{digits + 1}g}"
+    return f"{x:.{digits}e}".replace("e-0", "e-").replace("e+0", "e+")
+
+
+def table(headers: list[str], rows: list[list]) -> list[str]:
+    out = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
+    for r in rows:
+        out.append("| " + " | ".join(str(c) for c in r) + " |")
+    return out
+
+
+def report_path(out: str | None, quick: bool, name: str) -> Path:
+    """Where a report command writes its Markdown file (its PNGs go next to it).
+
+    ``--out`` when given (a path relative to the working directory, as any command-line path;
+    ``--out docs/<name>`` from the repository root regenerates the committed report). Without it a
+    ``--quick`` run writes into a new temporary directory and a full run into ``runs/reports/<name>``
+    under the working directory (``runs/`` is git-ignored): a run never rewrites a tracked file unless
+    asked to."""
+    if out is not None:
+        return Path(out).resolve()
+    if quick:
+        return Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / name
+    return (Path("runs") / "reports" / name).resolve()
+
+
+def write(path: str, lines: list[str]) -> None:
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    with open(path, "w") as f:
+        f.write("\n".join(lines).rstrip() + "\n")

@@ -1,0 +1,85 @@
+"""The verdict per (actuation, law, table): which actuations and which walls make the penny's probe tasks
+solvable, from theorems and certified witnesses, never from a comparison of RL success rates.
+
+* "impossible (theorem Tk)": the theory proves the probe's task unreachable from every start/target pair the
+  cell can draw (docs/controllability_theory.md; penny_env.analysis.controllability_theorems.cell_theorem);
+* "possible (witnessed k/N)": at least one of N start/target pairs was solved by an episode of the package's
+  own environment that ended with is_success (studies/witness.py);
+* "open": neither (no theorem, no witness).
+
+Where a theorem excludes only some of the N pairs drawn (pair_theorem), the verdict says so:
+"possible (witnessed k/N; m/N impossible, theorem Tk)" or "open (m/N impossible, theorem Tk)".
+
+A witnessed success in a cell that a theorem declares impossible is a contradiction (a bug in the
+simulator, the witness or the theorem's premises) and raises, rather than letting either win silently.
+The RL agents appear beside the verdict as learnability: their pooled success rate as a share of the
+witnessed rate.
+"""
+from __future__ import annotations
+
+import functools
+
+from penny_env.analysis.controllability_theorems import ANCHORS as _THEOREM_ANCHORS
+
+THEORY_DOC = "controllability_theory.md"
+# GitHub's anchors of the theory page's headings ("## T2 Steer only" -> #t2-steer-only; a test checks them)
+ANCHORS = {"T1": "t1-impact-laws-in-scaled-speeds", **_THEOREM_ANCHORS}
+
+# what the theory says of the cells it does not declare impossible (cited beside the witnessed verdict)
+CONTEXT = {"Steer": "T2", "Drive": "T3", "Both": "T4"}
+
+
+@functools.lru_cache(maxsize=None)
+def theorem_of(probe: str, table: str, law: str = "elastic"):
+    """(theorem id, statement) where the theory proves every pair of the cell impossible, else None. The
+    theory's own code decides (penny_env.analysis.controllability_theorems, which checks the theorem's
+    hypotheses against the cell's scene and task: start speeds, tolerances, heading offset)."""
+    from penny_env.analysis.controllability_theorems import theorem_for
+    from studies.cells import cell_spec
+
+    env_id, overrides = cell_spec(probe, table, "elastic" if law == "-" else law)  # "-": the plane's one cell
+    found = theorem_for(env_id, **overrides)
+    return None if found is None else (found.id, found.reason)
+
+
+def anchor_of(theorem_id: str) -> str:
+    """The theory page's anchor of a statement id ("T2.3" -> the T2 section's)."""
+    return ANCHORS[theorem_id.split(".")[0]]
+
+
+def cell_verdict(probe: str, table: str, witnessed: int, pairs: int, law: str = "elastic", excluded: int = 0,
+                 excluded_by: str = "") -> str:
+    """The verdict of one cell from the theory and the witness counts (k witnessed of N pairs; `excluded` of the
+    N pairs impossible by the pair theorems `excluded_by`, e.g. "T2.5"; a pair is never both)."""
+    for name, v in (("witnessed", witnessed), ("pairs", pairs), ("excluded", excluded)):
+        if isinstance(v, bool) or int(v) != v:
+            raise TypeError(f"{name} must be an integer, got {v!r}")
+    if pairs < 1:
+        raise ValueError(f"pairs must be >= 1, got {pairs}")
+    if not 0 <= witnessed <= pairs:
+        raise ValueError(f"witnessed must be in [0, pairs = {pairs}], got {witnessed}")
+    if not 0 <= excluded <= pairs - witnessed:
+        raise ValueError(f"excluded must be in [0, pairs - witnessed = {pairs - witnessed}] (a witnessed pair that a "
+                         f"theorem excludes is a contradiction), got {excluded}")
+    thm = theorem_of(probe, table, law)
+    if thm is not None:
+        if witnessed:
+            raise ValueError(f"{probe} on {table}: {witnessed} witnessed pair(s) contradict theorem {thm[0]} "
+                             f"({thm[1]}); the simulator, the witness or the theorem's premises are wrong")
+        return f"impossible (theorem {thm[0]})"
+    some = f"{excluded}/{pairs} impossible, theorem {excluded_by or '?'}" if excluded else ""
+    if witnessed:
+        return f"possible (witnessed {witnessed}/{pairs}{'; ' + some if some else ''})"
+    return f"open ({some})" if some else "open"
+
+
+def learnability(rl_successes: int, rl_episodes: int, witnessed: int, pairs: int):
+    """(RL success rate, its exact 95 % interval, the rate as a share of the witnessed rate, the share's
+    interval) or None where the witnessed rate is 0 (nothing to compare with)."""
+    from studies.stats import clopper_pearson
+    if witnessed == 0:
+        return None
+    rate = rl_successes / rl_episodes
+    lo, hi = clopper_pearson(rl_successes, rl_episodes)
+    w = witnessed / pairs
+    return rate, (lo, hi), rate / w, (lo / w, hi / w)

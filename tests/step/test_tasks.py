@@ -1,0 +1,146 @@
+"""Tasks are records in a registry (penny_env/step/tasks/): a task from outside the package is one module and a
+preset (tests/step/example_task.py), checked when it is registered, run by the single and the vector env on every
+backend, and trainable; the built-in tasks' draws equal the numpy implementation they replaced."""
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from penny_env import PennyEnv, PennyVectorEnv
+from penny_env.backends.choice import available
+from penny_env import register_task
+from penny_env.step.tasks import TASKS, Task, TaskRecord
+from penny_env.step.tasks import reach
+
+needs_numba = pytest.mark.skipif(not available(), reason="numba is not installed")
+HURRY = {"kind": "hurry", "max_episode_steps": 50, "tolerance": 0.02, "time_cost": 0.05}
+
+
+@pytest.fixture(scope="module")
+def hurry():
+    import tests.step.example_task  # noqa: F401  (registers "hurry")
+    yield TASKS["hurry"]
+
+
+def test_an_outside_task_runs_in_every_env_and_backend(hurry):
+    envs = [PennyEnv("ellipse", HURRY, backend=b) for b in ("python", "numba")]
+    vec = [PennyVectorEnv(3, "ellipse", HURRY, backend=b) for b in ("python", "numba")]
+    for e in envs + vec:
+        assert e.observation_space.shape[-1] == 11 and e.observation_space.low[..., 10].max() == 0.0
+    obs = [e.reset(seed=4)[0] for e in envs] + [v.reset(seed=4)[0][0] for v in vec]
+    assert all(np.array_equal(obs[0], o) for o in obs)
+    rng = np.random.default_rng(0)
+    for t in range(1, 30):
+        a = rng.uniform(-1, 1, 2)
+        outs = [e.step(a) for e in envs] + [v.step(np.tile(a, (3, 1))) for v in vec]
+        for o in outs[1:2]:
+            assert np.array_equal(o[0], outs[0][0]) and o[1] == outs[0][1]
+        for o in outs[2:]:
+            assert np.array_equal(o[0][0], outs[0][0]) and o[1][0] == outs[0][1]
+        if outs[0][2]:
+            break
+        assert outs[0][0][10] == np.float32(t / 50)  # the task's own observation entry: its clock
+
+
+def test_an_outside_task_trains_for_a_few_steps(hurry):
+    pytest.importorskip("stable_baselines3")
+    import torch
+    from stable_baselines3 import PPO
+
+    from penny_env.sb3 import PennySB3VecEnv
+    torch.set_num_threads(1)
+    venv = PennySB3VecEnv("PennyReach-Ellipse-v0", num_envs=4, task=HURRY)
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0).learn(256)
+    assert model.num_timesteps >= 256 and venv.observation_space.shape == (11,)
+    from gymnasium.utils.env_checker import check_env
+    check_env(gym.make("penny_env:PennyReach-Ellipse-v0", task=HURRY).unwrapped, skip_render_check=True)
+
+
+def test_the_reward_stage_is_the_tasks_own(hurry):
+    e = PennyEnv("ellipse", HURRY, backend="python")
+    r = PennyEnv("ellipse", {"kind": "reach", "max_episode_steps": 50, "tolerance": 0.02}, backend="python")
+    e.reset(seed=9)
+    r.reset(seed=9)
+    for _ in range(10):
+        a = np.array([0.3, 0.8])
+        (_, re, te, tu, _), (_, rr, _, _, _) = e.step(a), r.step(a)
+        assert math.isclose(re, rr - 0.05, rel_tol=0, abs_tol=1e-12)
+        if te or tu:
+            break
+
+
+def _stage(k, before, after, ctrl, n_arc, xp):
+    return 0.0, False
+
+
+class _K(NamedTuple):
+    x: float
+
+
+@pytest.mark.fast
+def test_a_task_is_checked_when_it_is_registered():
+    @dataclass(frozen=True)
+    class Cfg(Task):
+        kind: str = "t1"
+
+    with pytest.raises(TypeError, match="register_task takes a TaskRecord"):
+        register_task("t1")
+    with pytest.raises(ValueError, match="identifier"):
+        register_task(TaskRecord("t 1", Cfg, lambda s, t, L: _K(1.0), _stage, reach.target))
+    with pytest.raises(TypeError, match=r"reward must take \(k, before, after, ctrl, n_arc, xp\)"):
+        register_task(TaskRecord("t1", Cfg, lambda s, t, L: _K(1.0), lambda k, a: (0.0, False), reach.target))
+    with pytest.raises(TypeError, match="config must be a dataclass derived from"):
+        register_task(TaskRecord("t1", dict, lambda s, t, L: _K(1.0), _stage, reach.target))
+    with pytest.raises(ValueError, match=r"extra_obs\[0\]"):
+        register_task(TaskRecord("t1", Cfg, lambda s, t, L: _K(1.0), _stage, reach.target, lambda k, st, obs, i: None,
+                                 ((1.0, 0.0),)))
+    with pytest.raises(ValueError, match="give both or neither"):
+        register_task(TaskRecord("t1", Cfg, lambda s, t, L: _K(1.0), _stage, reach.target, None, ((0.0, 1.0),)))
+    assert "t1" not in TASKS
+
+
+@pytest.mark.fast
+def test_a_task_field_of_another_kind_is_refused_naming_it():
+    from penny_env.step.config import UnknownFieldError
+    with pytest.raises(UnknownFieldError, match="impacts_goal"):
+        PennyEnv("ellipse", "reach", impacts_goal=3)
+    with pytest.raises(ValueError, match="task.kind must be one of"):
+        PennyEnv("ellipse", {"kind": "sprint"})
+
+
+@pytest.mark.fast
+def test_draws_equal_the_numpy_implementation_they_replaced():
+    """The per-env reset stage (functional.initial_state and the tasks' target stages) draws, on every
+    registered id, the very bits penny_env's vectorised numpy sampler drew (tests/reference/numpy_draws.py)."""
+    from penny_env.envs.registration import env_ids
+    from penny_env.envs.scene import env_presets
+    from tests.reference import numpy_draws
+    presets = env_presets()
+    n = 64
+    for env_id in env_ids():
+        spec = dict(presets[env_id])
+        scene, task = spec.pop("scene"), spec.pop("task")
+        v = PennyVectorEnv(n, scene, task, backend="python", **spec)
+        v.reset(seed=123)
+        keys = numpy_draws.seed_keys(np.arange(123, 123 + n))
+        for episode in (0, 3):
+            S, target, arc = numpy_draws.sample(v._core, keys, np.full(n, episode, dtype=np.uint64))
+            if episode:
+                v.reset(seed=[123 + i for i in range(n)])
+                for _ in range(episode):
+                    v.reset()
+            assert np.array_equal(v._st.S, S), env_id
+            assert np.array_equal(v._st.target, target) and np.array_equal(v._st.arc, arc), env_id
+
+
+@needs_numba
+def test_draws_are_the_same_bits_compiled_and_at_extreme_keys():
+    from penny_env.step.draws import seed_keys
+    envs = [PennyVectorEnv(4, "ellipse", {"kind": "reach", "heading_offset": 0.05}, backend=b) for b in ("python", "numba")]
+    for seed in (0, 2**64 - 4, 2**63 - 1):
+        obs = [e.reset(seed=seed)[0] for e in envs]
+        assert np.array_equal(*obs) and np.array_equal(envs[0].states, envs[1].states)
+    assert seed_keys([2**64 - 1]).dtype == np.uint64

@@ -1,0 +1,129 @@
+"""The answer to the paper's second question (studies/billiards_answer.py): its cross-check against a
+published Lyapunov exponent (point_billiard), the periodic orbits and islands (periodic_orbits), the theorems it
+states for the circle (integrable, not ergodic; the dissipative fate), the wedged penny, and the --quick run."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from studies import billiards_answer as ba
+from penny_env.analysis import boundary_map as bm
+from penny_env.analysis import periodic_orbits as po
+from studies import point_billiard as pb
+from penny_env.physics import PennyParams, make_table
+
+ROOT = Path(__file__).resolve().parents[2]
+P = PennyParams()
+RHO = float(bm.metric_speed(ba.PAPER_STATE, P))
+
+
+def test_sinai_jacobian_is_the_finite_difference_one():
+    """Chernov-Markarian's Jacobian of the disk-to-disk map equals central differences of the map itself."""
+    rho, rng = 0.1, np.random.default_rng(1)
+    for _ in range(6):
+        th, ph = rng.uniform(-3, 3), rng.uniform(-1.2, 1.2)
+
+        def F(r, phi):
+            t1, _, tau, p0, p1 = pb.sinai_step(r / rho, r / rho + phi, rho)
+            return np.array([rho * t1, p1]), tau, p0, p1
+        (_, tau, p0, p1), h = F(rho * th, ph), 1e-7
+        J = np.zeros((2, 2))
+        for j, (dr, dp) in enumerate(((h, 0.0), (0.0, h))):
+            d = F(rho * th + dr, ph + dp)[0] - F(rho * th - dr, ph - dp)[0]
+            d[0] = (d[0] + math.pi * rho) % (2 * math.pi * rho) - math.pi * rho
+            J[:, j] = d / (2 * h)
+        np.testing.assert_allclose(J, pb.jacobian(tau, p0, p1, rho), rtol=1e-5, atol=1e-6)
+
+
+def test_the_lyapunov_code_reproduces_dahlqvists_exponent():
+    """The QR routine of the penny's exponents on the Sinai billiard approaches the published -2 ln rho + C as rho
+    shrinks (the formula's error is O(rho ln^2 rho)); the mean free path is Santalo's (1 - pi rho^2) / (2 rho)."""
+    small, _, mfp = pb.sinai_lyapunov(0.01, 3, 4000, seed=3)
+    big, _, _ = pb.sinai_lyapunov(0.1, 3, 4000, seed=3)
+    assert abs(small.mean() - pb.dahlqvist(0.01)) < 0.06
+    assert abs(small.mean() - pb.dahlqvist(0.01)) < abs(big.mean() - pb.dahlqvist(0.1))
+    assert pb.DAHLQVIST_C == pytest.approx(-0.12837, abs=1e-5)
+    assert mfp == pytest.approx((1 - math.pi * 1e-4) / 0.02, rel=0.05)
+
+
+def test_the_ellipse_has_an_elliptic_period_two_orbit_with_an_island():
+    """Newton on F^2 near (s, beta, psi) = (0.0104, 0.1733, 2.7365) converges to a period-2 orbit of the elastic
+    ellipse whose eigenvalues are a pair on the unit circle and 1 (elliptic); orbits started 1e-3 away stay within
+    0.01 for 300 impacts (an island). The axes' head-on bounces are hyperbolic (multiplier above 1000)."""
+    smap = po.SectionMap(ba.TABLES["ellipse"], P, RHO)
+    found = po.find_periodic(smap, 2, np.array([[0.0104, 0.1733, 2.7365]]))
+    assert len(found) == 1
+    z, J, res, _ = found[0]
+    kind, ev = po.classify(J)
+    assert kind == "elliptic" and res < po.RESIDUAL
+    assert np.allclose(np.abs(ev), 1.0, atol=1e-3) and np.abs(ev.imag).max() > 0.01
+    assert ba.island(smap, z, 2, 300, np.random.default_rng(0)) < 0.01
+    axis = po.find_periodic(smap, 2, np.array([[0.0, 0.0, np.pi]]))
+    assert po.classify(axis[0][1])[0] == "hyperbolic" and abs(po.classify(axis[0][1])[1][0]) > 1e3
+
+
+def test_the_elastic_circle_is_integrable_hence_not_ergodic():
+    """|beta| is invariant along every elastic circle orbit (to round-off over 3000 impacts) and differs between
+    orbits: an invariant function that is not constant, so the map is not ergodic."""
+    tab = make_table(ba.TABLES["circle"])
+    S, _, beta, _ = bm.sample_invariant(6, tab, np.random.default_rng(4), P, RHO)
+    orb = bm.iterate(S, np.ones(6), 3000, table=tab, law="elastic", params=P, rescale=True)
+    _, b, _, _ = bm.coordinates(orb)
+    spread = np.nanmax(np.abs(b), 0) - np.nanmin(np.abs(b), 0)
+    assert spread.max() < 1e-7
+    means = np.nanmean(np.abs(b), 0)
+    assert means.max() - means.min() > 0.1
+
+
+@pytest.mark.parametrize("law", [0.9, 0.5, "plastic"], ids=str)
+def test_circle_dissipative_orbits_graze_keeping_the_tangential_energy(law):
+    """The theorem of section 7 on the circle: every orbit from the invariant measure reaches grazing and keeps the
+    tangential share 1 - q0^2 of its energy (to 1e-9), whatever the restitution."""
+    cfg = dict(ba.CONFIGS["quick"], fate_orbits=24, fate_impacts=600, fate_tangent=0)
+    rows, _ = ba.fate("circle", law, cfg, P, RHO, seed=5)
+    assert all(r["stop"] == "grazing" for r in rows)
+    assert max(abs(r["kept"] - (1 - r["q0"] ** 2)) for r in rows) < 1e-9
+
+
+def test_a_penny_wedged_as_a_chord_sticks():
+    """The ellipse's dissipative fate 'wedged': a penny whose both ends touch the wall (a chord near the top) is hit
+    by its ends alternately at zero flight time, its speed shrinking at every impact (impacts accumulate at one
+    instant)."""
+    tab = make_table(ba.TABLES["ellipse"])
+    rng = np.random.default_rng(301)
+    S, _, _, _ = bm.sample_invariant(16, tab, rng, P, RHO)
+    orb = bm.iterate(S[13:14], np.ones(1), 120, table=tab, law=0.5, params=P, rescale=False)
+    f = orb.flight[:, 0]
+    zero = np.flatnonzero(f == 0.0)
+    assert zero.size > 40 and np.all(np.diff(zero[-20:]) == 1)
+    k = zero[-20]
+    both = [float(tab.h(*(orb.post[k, 0, :2] + s * P.R * np.array([math.cos(orb.post[k, 0, 3]),
+                                                                   math.sin(orb.post[k, 0, 3])])))) for s in (1, -1)]
+    assert max(abs(x) for x in both) < 1e-9
+    speed = bm.metric_speed(orb.post[zero[-20]:zero[-1], 0], P)
+    assert np.all(np.diff(speed[::2]) < 0)
+
+
+def test_quick_run_writes_only_its_folder(reports_untouched, capsys):
+    readme = (ROOT / "README.md").read_text()
+    out, s = ba.main(["--quick"])
+    assert out.exists() and (out.parent / "billiards_answer_slices.png").exists()
+    text = out.read_text()
+    for heading in ("## The answer", "invariant measure (theorem)", "not ergodic (theorem)", "published answer",
+                    "Periodic orbits", "2-D slices", "Dissipative walls", "Related work"):
+        assert heading in text
+    assert (ROOT / "README.md").read_text() == readme
+    assert ROOT / "docs" not in out.parents
+
+
+def test_readme_and_billiards_md_carry_the_committed_answer():
+    """The question-2 blocks of the README and docs/billiards.md are answer_block of the committed summary."""
+    import json
+
+    summary = json.loads((ROOT / "docs" / "billiards_answer.json").read_text())
+    for path, base in ((ROOT / "README.md", "docs/"), (ROOT / "docs" / "billiards.md", "")):
+        text = path.read_text()
+        got = text.split(ba.README_BEGIN, 1)[1].split(ba.README_END, 1)[0].strip()
+        assert got == ba.answer_block(summary, base).strip(), path.name
+        assert f"]({base}billiards_answer.md)" in got

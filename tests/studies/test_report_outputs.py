@@ -1,0 +1,67 @@
+"""Report commands write where --out says, from any working directory, and --quick never writes over the
+committed reports (docs/) or the README: without --out a quick run writes into a temporary directory."""
+import importlib
+import importlib.util
+import re
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from studies.common import report_path
+
+REPO = Path(__file__).parents[2]
+
+
+def test_report_path(reports_untouched):
+    cwd = reports_untouched
+    assert report_path("a/b.md", quick=True, name="x.md") == cwd / "a" / "b.md"
+    assert report_path("a/b.md", quick=False, name="x.md") == cwd / "a" / "b.md"
+    assert report_path(None, quick=False, name="x.md") == cwd / "runs" / "reports" / "x.md"  # never a tracked file
+    quick = report_path(None, quick=True, name="x.md")
+    assert quick.name == "x.md" and quick.parent.is_dir()
+    assert Path(tempfile.gettempdir()).resolve() in quick.resolve().parents and cwd not in quick.parents
+
+
+# the report commands whose --out has a default; the others (bench_solvers, stability, work_precision,
+# throughput) write nothing without --out
+DEFAULTED = [("penny_env.analysis.dynamics", "matplotlib"), ("studies.paper_figures", "matplotlib"),
+             ("studies.controllability", "matplotlib"), ("studies.baselines", "stable_baselines3"),
+             ("studies.ppo_compare", "stable_baselines3")]
+
+
+@pytest.mark.parametrize("module, needs", DEFAULTED)
+def test_quick_without_out_writes_to_a_temporary_directory(reports_untouched, capsys, module, needs):
+    if importlib.util.find_spec(needs) is None:
+        pytest.skip(f"{needs} (an optional extra of {module}) is not installed")
+    importlib.import_module(module).main(["--quick"])
+    wrote = re.findall(r"^wrote (\S+?\.md)", capsys.readouterr().out, re.M)
+    assert len(wrote) == 1, "the command says where it wrote"
+    out = Path(wrote[0])
+    assert out.exists() and out.stat().st_size > 0
+    assert Path(tempfile.gettempdir()).resolve() in out.resolve().parents
+    assert REPO.resolve() not in out.resolve().parents and reports_untouched not in out.parents
+    assert list(reports_untouched.iterdir()) == []  # nothing in the working directory either
+
+
+def test_train_output_folder(reports_untouched, monkeypatch):
+    from training import train
+    seen = []
+    monkeypatch.setattr(train, "train", lambda cfg, out, quick=False, **kw: seen.append((out, quick)))
+    config = str(REPO / "configs" / "train" / "ppo_reach_ellipse.yaml")
+    train.main(["--config", config, "--quick", "--out", "runs/mine"])
+    train.main(["--config", config, "--quick"])
+    train.main(["--config", config])
+    (given, _), (quick, _), (full, _) = seen
+    assert given == reports_untouched / "runs" / "mine"
+    assert Path(tempfile.gettempdir()).resolve() in quick.resolve().parents and quick.name == "ppo_reach_ellipse"
+    assert full == reports_untouched / "runs" / "ppo_reach_ellipse"
+
+
+def test_throughput_quick_refuses_to_write_the_readme(reports_untouched):
+    from devtools import throughput
+    readme = reports_untouched / "README.md"
+    readme.write_text("<!-- throughput:start -->\n<!-- throughput:end -->\n")
+    with pytest.raises(SystemExit):
+        throughput.main(["--quick", "--readme", str(readme)])
+    assert readme.read_text() == "<!-- throughput:start -->\n<!-- throughput:end -->\n"
