@@ -119,8 +119,8 @@ def check_mapped(S, post, sigma, params, table, law, name: str = "states") -> No
         bad = outward & (after > before * (1.0 + ENERGY_RTOL))
         code = FAULT_ENERGY
         if not bad.any():
-            n_before, n_after = a * S[4] + b * S[5], a * post[4] + b * post[5]
-            bad = outward & np.broadcast_to(n_after > OUTWARD_RTOL * n_before, bad.shape)
+            n_after = a * post[4] + b * post[5]
+            bad = outward & np.broadcast_to(n_after > OUTWARD_RTOL * (np.abs(a * S[4]) + np.abs(b * S[5])), bad.shape)
             code = FAULT_OUTWARD
     if bad.any():
         i = int(np.flatnonzero(bad)[0])

@@ -11,7 +11,8 @@ it first, with a message naming the law:
   numbers (TypeError otherwise);
 * on :func:`trial_arguments`, typical impacts (the end moving outward, as the event loop calls a
   law), it returns finite velocities, never adds kinetic energy ``(Itot W^2 + J w^2) / 2`` beyond
-  round-off (ENERGY_RTOL) and leaves the end no longer moving outward (n+ = a W+ + b w+ <= OUTWARD_RTOL n:
+  round-off (ENERGY_RTOL) and leaves the end no longer moving outward (n+ = a W+ + b w+ at most OUTWARD_RTOL
+  (|a W| + |b w|), round-off:
   the identity law would have the search find the same impact at once, forever); a law registered with
   ``conserves_energy=True`` must also not lose any;
 * numba compiles it for float64 arguments, and the compiled function passes the same trials (numba's math
@@ -121,7 +122,7 @@ def try_law(name: str, update, e: float, conserves_energy: bool, label: str = "u
                              "increase the kinetic energy")
         a, b = args[2], args[3]
         n_before, n_after = a * W + b * w, a * W1 + b * w1
-        if n_after > OUTWARD_RTOL * n_before:
+        if n_after > OUTWARD_RTOL * (abs(a * W) + abs(b * w)):
             raise ValueError(f"register_law({name!r}): {label} leaves the end moving outward at the impact {_where(args)}: "
                              f"its normal speed n = a W + b w is {n_before:.6g} before and {n_after:.6g} after; a law "
                              "must send the end back inside (n+ <= 0), or the penny would cross the wall")

@@ -390,11 +390,11 @@ def relocate_measured(s, m):
 # -- the run-time guard: faults the event loop records (ImpactBuffers.fault) rather than raising in compiled code
 
 
-def law_fault(pre, post, n_pre, n_post, m):
+def law_fault(pre, post, n_scale, n_post, m):
     """FAULT_NONFINITE if the law gave a non-finite velocity, FAULT_ENERGY if it added kinetic energy beyond
     round-off (laws.ENERGY_RTOL; no law may add any), FAULT_OUTWARD if it left the end moving outward (its normal
-    speed n_post beyond OUTWARD_RTOL of n_pre, the one before: the search would find the same impact at once,
-    the call spinning through its event cap), else FAULT_NONE. Only at impacts: the hot path of impact-free
+    speed n_post beyond OUTWARD_RTOL of n_scale = |a W| + |b w| before: the search would find the same impact at
+    once, the call spinning through its event cap), else FAULT_NONE. Only at impacts: the hot path of impact-free
     steps never pays for it."""
     W, w = post[4], post[5]
     if not (math.isfinite(W) and math.isfinite(w)):
@@ -402,7 +402,7 @@ def law_fault(pre, post, n_pre, n_post, m):
     before = m.Itot * (pre[4] * pre[4]) + m.J * (pre[5] * pre[5])
     if m.Itot * (W * W) + m.J * (w * w) > before * (1.0 + ENERGY_RTOL):
         return FAULT_ENERGY
-    if n_post > OUTWARD_RTOL * n_pre:
+    if n_post > OUTWARD_RTOL * n_scale:
         return FAULT_OUTWARD
     return FAULT_NONE
 
@@ -413,7 +413,8 @@ def record_fault(buf, row, code):
 
 
 def law_at_end(s, sigma, m):
-    """(post-impact state of end sigma (see laws.apply_law), the end's normal speed a W + b w before and after)."""
+    """(post-impact state of end sigma (see laws.apply_law), the scale |a W| + |b w| of the end's normal speed
+    before, the end's normal speed a W + b w after)."""
     R = m.R
     px, py, _, _ = end_point(s[0], s[1], s[3], s[4], s[5], sigma, R, SCALAR)
     _, hx, hy = wall_terms(m, px, py)
@@ -421,7 +422,8 @@ def law_at_end(s, sigma, m):
     a = R * (hx * c + hy * sn)
     b = sigma * R * (hy * c - hx * sn)
     W, w = law_terms(m, s[4], s[5], a, b, hx * hx + hy * hy)
-    return (s[0], s[1], s[2], s[3], W, w), a * s[4] + b * s[5], a * W + b * w
+    # (the scale of n: |a W| + |b w| before, so that round-off of a near-grazing impact's cancellation is not a fault)
+    return (s[0], s[1], s[2], s[3], W, w), abs(a * s[4]) + abs(b * s[5]), a * W + b * w
 
 
 def controls_push_out(s, acc1, acc2, m, delta):
@@ -568,8 +570,8 @@ def advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
             s = pre
             elapsed += t_hit
             continue
-        post, n_pre, n_post = law_at_end(pre, float(end), m)
-        fault = law_fault(pre, post, n_pre, n_post, m)
+        post, n_scale, n_post = law_at_end(pre, float(end), m)
+        fault = law_fault(pre, post, n_scale, n_post, m)
         if fault != FAULT_NONE:  # the law broke its contract: stop at the impact, before it (the caller reports it)
             record_fault(buf, row, fault)
             return pre, elapsed + t_hit

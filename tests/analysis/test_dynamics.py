@@ -66,7 +66,7 @@ def test_lyapunov_exponents_separate_integrable_from_chaotic():
 
 def test_dynamics_report_quick(reports_untouched):
     pytest.importorskip("matplotlib")
-    from penny_env.analysis import dynamics
+    from studies import dynamics
     tmp_path = reports_untouched
     out = tmp_path / "dynamics.md"
     dynamics.main(["--quick", "--out", "dynamics.md"])

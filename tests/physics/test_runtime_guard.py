@@ -202,8 +202,8 @@ def test_the_guard_is_silent_on_sound_laws_and_tables():
 def test_the_cuda_backend_under_the_simulator_behaves_as_the_cpu():
     pytest.importorskip("numba_cuda")
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, str(ROOT / "tests" / "physics" / "cuda_sim_guard_check.py")], capture_output=True, text=True,
-                       env=env, timeout=900, cwd=ROOT)
+    r = subprocess.run([sys.executable, str(ROOT / "tests" / "physics" / "cuda_sim_guard_check.py")], capture_output=True,
+                       text=True, env=env, timeout=900, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-3000:]
     rows = [json.loads(line) for line in r.stdout.splitlines() if line.startswith("{")]
     assert [row["case"] for row in rows] == ["vector", "batch"] and all(row["same"] for row in rows), rows

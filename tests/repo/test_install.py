@@ -187,7 +187,7 @@ def test_an_edited_task_module_is_recompiled_with_numba_cache_dir_set(tmp_path):
 
     compiled, python = rewards()
     assert compiled == python
-    tasks = src / "penny_env" / "envs" / "tasks" / "reach.py"
+    tasks = src / "penny_env" / "step" / "tasks" / "reach.py"
     old = "    return progress(k, before, after) - k.ctrl_cost * ctrl + k.success_bonus * success, success\n"
     assert tasks.read_text().count(old) == 1
     tasks.write_text(tasks.read_text().replace(old, old.replace("success, success", "success + 1000.0, success")))

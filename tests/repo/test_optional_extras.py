@@ -30,7 +30,8 @@ def test_tests_skip_with_their_reason_without_the_extras(tmp_path):
                  "tests/training/test_training.py::test_config_errors_name_the_field", "tests/envs/test_sb3.py",
                  "tests/studies/test_analysis.py::test_matching_counts_missed_and_spurious",
                  "tests/studies/test_analysis.py::test_integrators_find_first_impacts_of_paper_elastic_circle",
-                 "tests/repo/test_readme.py::test_ppo_snippet_runs", "tests/analysis/test_dynamics.py::test_dynamics_report_quick"]
+                 "tests/repo/test_readme.py::test_ppo_snippet_runs",
+                 "tests/analysis/test_dynamics.py::test_dynamics_report_quick"]
     env = dict(os.environ, PYTEST_DISABLE_PLUGIN_AUTOLOAD="1", PYTHONPATH=str(REPO))
 
     def run_selection():

@@ -35,7 +35,7 @@ def test_quick_run_writes_report_and_csvs(quick_run):
     for heading in ("## Fairness settings", "## Results", "## Verdict per cell", "## Curves: validation success",
                     "## What works", "## Item 4's goal, counting every learned agent"):
         assert heading in text, heading
-    assert re.search(r"^- command: `python -m training\.fair_pure_rl --quick --out .*fair_pure_rl\.md` \(\d+ s wall",
+    assert re.search(r"^- command: `python -m studies\.fair_pure_rl --quick --out .*fair_pure_rl\.md` \(\d+ s wall",
                      text, re.M)
     assert re.search(r"^- machine: ", text, re.M) and re.search(r"^- date: ", text, re.M)
     assert "- sources: sha256" not in text  # only the committed report carries the provenance line

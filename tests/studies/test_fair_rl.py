@@ -32,7 +32,7 @@ def test_quick_run_writes_report_and_csvs(quick_run):
     text = out.read_text()
     for heading in ("## The agents", "## Results", "## Verdict per cell", "## Curves: validation success per round"):
         assert heading in text, heading
-    assert re.search(r"^- command: `python -m training\.fair_rl --quick --out .*fair_rl\.md` \(\d+ s wall", text, re.M)
+    assert re.search(r"^- command: `python -m studies\.fair_rl --quick --out .*fair_rl\.md` \(\d+ s wall", text, re.M)
     assert re.search(r"^- machine: ", text, re.M) and re.search(r"^- date: ", text, re.M)
     assert "- sources: sha256" not in text  # only the committed report carries the provenance line
     with open(out.with_name("fair_rl.csv")) as f:
