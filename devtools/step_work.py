@@ -81,7 +81,7 @@ def penny_costs(n, steps):
         costs, heavy = [], []
         for t in range(steps):
             a = venv.action_space.sample()
-            st = venv._st
+            st = venv._runner.st
             S, trig, cnt, d, stp = st.S.copy(), st.trig.copy(), st.count.copy(), st.dist.copy(), st.steps.copy()
             for i in np.flatnonzero(~st.pending):  # (the envs that reset at this step take no step)
                 state = (tuple(S[:, i]), tuple(trig[:, i]), (st.target[0, i], st.target[1, i]),

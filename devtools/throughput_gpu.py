@@ -86,7 +86,7 @@ def rates(env_id, n, steps, **cuda_options) -> dict:
         i[0] += 1
     # each way from the same state (a reset with seed 0): the state's impacts, not the order, set the work
     out = {"env.step": n * steps / timed(step, steps)}
-    dev = env._gpu
+    dev = env._runner
     parity = [0]
 
     def kernels():
@@ -107,7 +107,7 @@ def rates(env_id, n, steps, **cuda_options) -> dict:
 
 def kernel_rate(env_id, n, steps, **cuda_options) -> float:
     env = make(env_id, n, **cuda_options)
-    dev = env._gpu
+    dev = env._runner
     parity = [0]
 
     def kernels():

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .interrupts import load_numba
 from .physics import physics_build
 
 # capacity of the per-penny impact buffer of one batch call; a penny with more impacts in one
@@ -30,6 +31,8 @@ class CompiledBatch:
         from .choice import compiles
 
         self.target = check_target(target)
+        if target != "python":
+            load_numba()
         if target != "python" and not compiles(table):
             raise ValueError(f"table: only registered tables with compiled formulas compile, got {type(table).__name__}")
         self.model = scalar_model(params, table, law, settings)

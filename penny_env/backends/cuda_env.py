@@ -25,8 +25,9 @@ import contextlib
 
 import numpy as np
 
-from ..step.functional import SAME_STEP, EnvState, StepResults, kinetic_energy
 from ..physics.scalar import ImpactBuffers
+from ..step.functional import SAME_STEP, EnvState, StepResults, check_actions
+from .runner import StepOutputs, reset_outputs
 
 
 def torch_available_on_cuda() -> bool:
@@ -38,9 +39,9 @@ def torch_available_on_cuda() -> bool:
 
 
 class DeviceStep:
-    """The device side of a PennyVectorEnv with backend="cuda" (see the module docstring)."""
+    """The runner of a PennyVectorEnv with backend="cuda" (backends/runner.py's interface; the module docstring)."""
 
-    def __init__(self, env, device=None, outputs="torch", kernels="split"):
+    def __init__(self, fns, consts, p, m, core, n, K, device=None, outputs="torch", kernels="split"):
         from numba import cuda
         if outputs not in ("torch", "numpy", "device"):
             raise ValueError(f"outputs must be 'torch', 'device' or 'numpy', got {outputs!r}")
@@ -58,12 +59,11 @@ class DeviceStep:
         self.cuda = cuda
         self.device = 0 if device is None else int(device)
         self.outputs = outputs
-        self.env = env
-        self.fns = env._fns
-        core = env._core
-        n, K, d = env.num_envs, env.max_impacts_in_info, core.obs_dim
+        self.fns = fns
+        self.p = p
+        d = core.obs_dim
         self.n, self.K, self.obs_dim, self.n_act = n, K, d, core.n_act
-        self.same_step = env._p.autoreset == SAME_STEP
+        self.same_step = p.autoreset == SAME_STEP
         self.torch = None
         if outputs == "torch" or torch_available_on_cuda():
             import torch
@@ -71,16 +71,16 @@ class DeviceStep:
         alloc = self._alloc
         self.st = EnvState(alloc((6, n)), alloc((4, n)), alloc((2, n)), alloc((2, n)), alloc(n, np.int64), alloc(n),
                            alloc(n, np.int64), alloc(n), alloc(n, np.uint64), alloc(n, np.int64), alloc(n, np.bool_))
-        self.consts = self._upload(env._consts)
+        self.consts = self._upload(consts)
         self.actions = alloc((n, self.n_act))
         self.sets = [self._output_set() for _ in range(2)]
         self.reset_obs = self._alloc_output((n, d), np.float32)
         self.parity = 0
-        self.masks = self._view(self._upload(np.ones(n, dtype=bool), output=True))
+        self.masks = self._view(self._upload(np.ones(n, dtype=bool), output=True))  # (constant: shared by every step)
         self.kernels = kernels
         self.work = alloc(n, np.int64)      # the rare kernel's list of envs (backends/env.py, fast_step_env)
         self.work_count = alloc(1, np.int64)  # its length (cleared by each step's first kernel)
-        p, m, k = env._p, env._m, core.k
+        k = core.k
         if kernels == "split":
             clear = self.fns.clear_work_count.prepare(self.work_count)
             self.launches = [(clear,
@@ -163,41 +163,31 @@ class DeviceStep:
     def load_actions(self, actions):
         """The actions into their device buffer, checked as far as the host can without a round trip: a
         TypeError for a wrong type, a ValueError for a wrong shape; non-finite values are refused on the host
-        for host arrays (and for device ones with numpy outputs), and otherwise end the env's episode in the
-        kernel (functional.LIMIT_ACTION)."""
-        from ..step.actions import check_actions
+        for host arrays and, with numpy outputs (which synchronize anyway), for device arrays of every kind;
+        otherwise (device outputs) they end the env's episode in the kernel (functional.LIMIT_ACTION)."""
         shape = (self.n, self.n_act)
         torch = self.torch
         if torch is not None and isinstance(actions, torch.Tensor) and actions.is_cuda:
             # a torch tensor: checked from its metadata (no numba view: numba would synchronize on its stream)
-            if not actions.dtype.is_floating_point:
-                raise TypeError(f"actions must be a floating-point array, got dtype {actions.dtype}")
-            if tuple(actions.shape) != shape and not (self.n_act == 1 and tuple(actions.shape) == (self.n,)):
-                raise ValueError(f"actions must have shape {shape}, got shape {tuple(actions.shape)}")
-            if self.outputs == "numpy":  # (numpy outputs synchronize anyway: refuse as the CPU does)
-                finite = torch.isfinite(actions.reshape(self.n, -1)).all(dim=1)
-                if not bool(finite.all()):
-                    bad = torch.nonzero(~finite).flatten().cpu().numpy()
-                    raise ValueError(f"actions: non-finite action in sub-env(s) {bad[:10].tolist()}"
-                                     f"{' ...' if bad.size > 10 else ''}")
+            self._check_device_array(actions.dtype.is_floating_point, actions.dtype, tuple(actions.shape))
+            if self.outputs == "numpy":  # (numpy outputs synchronize anyway: checked on the host as the CPU does)
+                check_actions(actions.detach().cpu().numpy(), shape, "actions")
             self._actions_t().copy_(actions.reshape(shape))
             return
         if hasattr(actions, "copy_to_host") and hasattr(actions, "dtype") and not isinstance(actions, np.ndarray):
             # a numba device array (numba-cuda's, or its simulator's): copied on the device
-            if actions.dtype.kind != "f":
-                raise TypeError(f"actions must be a floating-point array, got dtype {actions.dtype}")
-            if actions.shape != shape and not (self.n_act == 1 and actions.shape == (self.n,)):
-                raise ValueError(f"actions must have shape {shape}, got shape {actions.shape}")
+            self._check_device_array(actions.dtype.kind == "f", actions.dtype, actions.shape)
             if actions.dtype != np.float64:
                 raise TypeError("actions as a numba device array must be float64 (or pass a torch tensor)")
+            if self.outputs == "numpy":
+                check_actions(actions.copy_to_host(), shape, "actions")
             self.actions.copy_to_device(actions.reshape(shape), stream=self.stream())
             return
         if hasattr(actions, "__cuda_array_interface__") and not isinstance(actions, np.ndarray):
             a = self.cuda.as_cuda_array(actions, sync=False)
-            if a.dtype.kind != "f":
-                raise TypeError(f"actions must be a floating-point array, got dtype {a.dtype}")
-            if a.shape != shape and not (self.n_act == 1 and a.shape == (self.n,)):
-                raise ValueError(f"actions must have shape {shape}, got shape {a.shape}")
+            self._check_device_array(a.dtype.kind == "f", a.dtype, a.shape)
+            if self.outputs == "numpy":
+                check_actions(a.copy_to_host(), shape, "actions")
             if a.dtype == np.float64 and a.is_c_contiguous():
                 self.actions.copy_to_device(a.reshape(shape), stream=self.stream())
             elif torch is not None:
@@ -207,6 +197,14 @@ class DeviceStep:
             return
         a = check_actions(actions, shape, "actions")
         self.actions.copy_to_device(np.ascontiguousarray(a, dtype=np.float64), stream=self.stream())
+
+    def _check_device_array(self, floating: bool, dtype, shape) -> None:
+        """TypeError for a device array that is not floating point, ValueError for one of the wrong shape."""
+        if not floating:
+            raise TypeError(f"actions must be a floating-point array, got dtype {dtype}")
+        want = (self.n, self.n_act)
+        if tuple(shape) != want and not (self.n_act == 1 and tuple(shape) == (self.n,)):
+            raise ValueError(f"actions must have shape {want}, got shape {tuple(shape)}")
 
     def _actions_t(self):
         if not hasattr(self, "_act_t"):
@@ -219,53 +217,32 @@ class DeviceStep:
         for launch in self.launches[parity]:
             launch.launch(stream)
 
-    def step(self, actions):
-        """env.step on the device (module docstring); returns env.step's tuple in the outputs' type."""
-        env = self.env
-        self.load_actions(actions)  # checked before the step starts (nothing changes on bad input)
+    def step(self):
+        """One step on the device (module docstring), on the actions loaded; its outputs (StepOutputs) in the
+        outputs' type: views of the output set the step wrote (valid until the step after the next), or host
+        copies (outputs "numpy")."""
         parity = self.parity
-        env._in_step = True
         self.launch(parity)
         self.parity = parity ^ 1
-        env._in_step = False
-        if env._trails is not None:
-            env._extend_trails()
-        return self.results(parity)
-
-    def results(self, parity):
-        """The outputs of set ``parity`` as env.step returns them."""
         out, buf = self.views[parity]
         if self.outputs == "numpy":
             host = StepResults(*(a.copy_to_host() for a in out))
-            counts, times, ends = buf.count.copy_to_host(), buf.time.copy_to_host().T, buf.end.copy_to_host().T
-            info = self.env._info(counts, np.ascontiguousarray(times), np.ascontiguousarray(ends), host.kinetic_energy,
-                                  host.terminated, host.limit, host.time, host.dist, host.arc_count)
-            if self.same_step and host.ended.any():
-                self.env._final_info(info, host.final_obs, host.ended, host.terminated)
-            return host.obs, host.reward, host.terminated, host.truncated, info
-        m = self.masks
-        info = {"impacts": buf.count, "_impacts": m, "impact_times": buf.time.T, "_impact_times": m,
-                "impact_ends": buf.end.T, "_impact_ends": m, "kinetic_energy": out.kinetic_energy, "_kinetic_energy": m,
-                "time": out.time, "_time": m, "distance": out.dist, "_distance": m, "is_success": out.terminated,
-                "_is_success": m, "limit": out.limit, "_limit": m}
-        if self.env._core.counts_arc:
-            info["arc_impacts"], info["_arc_impacts"] = out.arc_count, m
-        if self.same_step:
-            info["final_obs"], info["_final_obs"] = out.final_obs, out.ended
-            info["final_info"], info["_final_info"] = {"is_success": out.terminated, "_is_success": out.ended}, out.ended
-        return out.obs, out.reward, out.terminated, out.truncated, info
+            return StepOutputs(host, buf.count.copy_to_host(), np.ascontiguousarray(buf.time.copy_to_host().T),
+                               np.ascontiguousarray(buf.end.copy_to_host().T))
+        return StepOutputs(out, buf.count, buf.time.T, buf.end.T)
+
+    def mask(self):
+        """The info masks: numpy arrays (outputs "numpy"), else one constant device array shared by every key."""
+        return np.ones(self.n, dtype=bool) if self.outputs == "numpy" else self.masks
 
     # -- reset ---------------------------------------------------------------------------------------
-    def reset(self, host, rows, keys, episodes, states, targets):
-        """env.reset on the device: keys, episode counters and pending flags uploaded (host: the state as the
-        host last saw it), the rows' fresh episodes drawn on the device (the same draws as on the CPU), reset
-        options applied, every row's observation computed there. Returns (obs, info) as the step's outputs."""
+    def reset(self, keys, episodes, rows, states=None, targets=None):
+        """The reset on the device: keys, episode counters and pending flags uploaded, the rows' fresh episodes
+        drawn on the device (the same draws as on the CPU), reset options applied, every row's observation computed
+        there. Returns (obs, StepOutputs of the reset's info) in the outputs' type."""
+        host = self.state_to_host()
         host.key[:], host.episode[:] = keys, episodes
         host.pending[rows] = False
-        if states is not None:
-            host.S[:, rows] = states[rows].T
-        if targets is not None:
-            host.target[:, rows] = targets[rows].T
         for name in ("key", "episode", "pending"):
             getattr(self.st, name).copy_to_device(getattr(host, name))
         d_rows = self.cuda.to_device(np.ascontiguousarray(rows, dtype=np.int64))
@@ -284,15 +261,15 @@ class DeviceStep:
         if others.size:
             self.fns.observe_rows(self.cuda.to_device(others.astype(np.int64)), self.st, self.consts, self.reset_obs,
                                   stream=stream)
-        st = self.state_to_host()
-        n, K = self.n, self.K
-        info_host = (np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
-                     kinetic_energy(st.S, self.env._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8), st.time,
-                     st.dist, st.count)
+        out = reset_outputs(None, self.state_to_host(), self.p, self.K)
         if self.outputs == "numpy":
-            return self.reset_obs.copy_to_host(), self.env._info(*info_host)
-        info = self.env._info(*(self._view(self._upload(np.ascontiguousarray(a), output=True)) for a in info_host))
-        return self._view(self.reset_obs), info
+            obs = self.reset_obs.copy_to_host()
+            return obs, out._replace(results=out.results._replace(obs=obs))
+        def up(a):
+            return a if a is None else self._view(self._upload(np.ascontiguousarray(a), output=True))
+        obs = self._view(self.reset_obs)
+        results = StepResults(*(up(a) for a in out.results))._replace(obs=obs)
+        return obs, StepOutputs(results, up(out.counts), up(out.times), up(out.ends))
 
 
 @contextlib.contextmanager
@@ -321,8 +298,8 @@ class CudaGraphStep:
     and never synchronizes."""
 
     def __init__(self, env, warmup: int = 2):
-        g = getattr(env, "_gpu", None)
-        if g is None or g.outputs != "torch":
+        g = getattr(env, "_runner", None)
+        if not isinstance(g, DeviceStep) or g.outputs != "torch":
             raise ValueError("CudaGraphStep needs a PennyVectorEnv with backend='cuda' and outputs='torch'")
         torch = g.torch
         self.env = env

@@ -13,16 +13,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from ..step import draws, functional
 import math
 
-from ..step.functional import (NEXT_STEP, SAME_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots,
-                               conclude, distance, env_row, env_step, initial_state, limit_of, observe_row, observe_rows,
-                               reset_row, reset_rows, same_step_reset, step_env, step_envs, write_observation,
-                               write_outputs, write_state)
 from ..physics.scalar import FAULT_NONE, ImpactBuffers
+from ..step import draws, functional
+from ..step.functional import (NEXT_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots, conclude,
+                               distance, env_row, env_step, initial_state, limit_of, observe_row, observe_rows,
+                               record_step, reset_row, reset_rows, same_step_reset, step_env, step_envs,
+                               write_observation)
 from . import cache, generated, packing
 from .builder import Builder, check_target
+from .interrupts import compiling
+from .runner import observe_rows_packed, reset_rows_packed, step_envs_packed
 from .physics import build_variant, check_kind, physics_build, physics_modules, variant_key
 
 prange = range  # the loops below are kernels on CUDA (backends/builder.py)
@@ -77,22 +79,6 @@ def observe_state_packed(st, consts, obs):
     d = distance(st.s, st.target)
     write_observation(obs, 0, PennyState(st.s, trig, st.target, st.arc, 0, d, 0, 0.0), p, k)
     return trig, d
-
-
-def step_envs_packed(st, actions, consts, out, buf):
-    """The vector step (CPU and python): records from plain tuples, constants unpacked once."""
-    p, m, k = unpack(consts)  # noqa: F821
-    step_envs(EnvState(*st), actions, p, m, k, StepResults(*out), ImpactBuffers(*buf))
-
-
-def reset_rows_packed(rows, st, consts, obs):
-    p, m, k = unpack(consts)  # noqa: F821
-    reset_rows(rows, EnvState(*st), p, m, k, obs)
-
-
-def observe_rows_packed(rows, st, consts, obs):
-    p, m, k = unpack(consts)  # noqa: F821
-    observe_rows(rows, EnvState(*st), p, m, k, obs)
 
 
 def step_env_device(i, st, actions, consts, out, buf):
@@ -175,12 +161,7 @@ def fast_step_env(i, st, actions, p, m, k, out, buf, work, count):
                 s1 = flow_penny(st_i.s, acc1, acc2, p.dt, m.R)  # noqa: F821
                 new, r, te, tu, e, lim = conclude(st_i, s1, p.dt, limit_of(s1, p.dt, FAULT_NONE, p), ctrl, 0, p, k,
                                                   obs, i)
-                write_state(st, i, new)
-                write_outputs(out, i, new, r, te, tu, e, lim)
-                done = te or tu
-                if p.autoreset == NEXT_STEP:
-                    pending[i] = done
-                elif p.autoreset == SAME_STEP and done:
+                if record_step(st, i, new, r, te, tu, e, lim, p, out):  # (the shared bookkeeping; the reset: rare kernel)
                     enqueue(work, count, i, RESET_ONLY)
             else:
                 enqueue(work, count, i, FULL_STEP)
@@ -221,7 +202,7 @@ def _rows_count(args):
 # the functions the CPU's vector loop has pasted in at the source level (builder.inline_source): every array they
 # take from the records is then taken once, before the loop, and none is passed to a call per env
 STEP_PASTED = (functional.clear_slots, functional.clear_row, env_step, functional.transition, functional.run_interval,
-               functional.conclude, functional.pending_reset, functional.finish_env, functional.write_outputs,
+               functional.conclude, functional.pending_reset, functional.record_step, functional.write_outputs,
                functional.write_state, functional.same_step_reset, functional.reset_env)
 _ENTRY: dict = {}  # (target, variant_key(kind), task record, constants type) -> EnvEntryPoints
 
@@ -244,7 +225,8 @@ def env_modules(record) -> tuple:
     stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
     task_modules = tuple(dict.fromkeys(m for m in (sys.modules.get(f.__module__) for f in stages)
                                        if m is not None and getattr(m, "__file__", None)))
-    return physics_modules() + (functional, draws, sys.modules[__name__], packing) + task_modules
+    from . import runner
+    return physics_modules() + (functional, draws, sys.modules[__name__], runner, packing) + task_modules
 
 
 def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool = False,
@@ -262,6 +244,14 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     key = (target, variant_key(kind, law), record, constants_type, max_registers)
     if key in _ENTRY and not fresh:
         return _ENTRY[key]
+    with compiling():  # (a Ctrl-C is held while numba loads and the copies are made, and kept: backends/interrupts.py)
+        out = _build_entry_points(target, kind, record, constants_type, fresh, max_registers, law)
+        if not fresh:
+            _ENTRY[key] = out
+    return out
+
+
+def _build_entry_points(target, kind, record, constants_type, fresh, max_registers, law) -> EnvEntryPoints:
     from ..step.functional import EnvParams
     from ..physics.scalar import Model
     phys = physics_build(target, kind, fresh, law)  # (also picks the threading layer: backends/threads.py)
@@ -303,7 +293,7 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
     # inlined: a call that passes arrays increments and decrements their reference counts, atomically
     b.copies((functional.write_observation, functional.env_row, functional.write_state, functional.reset_env,
               functional.clear_slots, functional.write_outputs, functional.pending_reset, functional.same_step_reset,
-              functional.finish_env, functional.conclude), inline=True)
+              functional.record_step, functional.conclude), inline=True)
     if target == "cuda":
         b.namespace.update(FULL_STEP=FULL_STEP, RESET_ONLY=RESET_ONLY, math=math)
         b.copies((functional.transition, env_step, step_env, functional.reset_row, functional.observe_row,
@@ -330,8 +320,6 @@ def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool
         observes = b.loop(observe_rows, entry=observe_rows_packed, count=_rows_count)
         fast = rare = clear = None
     out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack, fast, rare, clear)
-    if not fresh:
-        _ENTRY[key] = out
     return out
 
 

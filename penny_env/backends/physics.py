@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cache, generated
+from .interrupts import compiling
 from .builder import Builder, check_target
 
 
@@ -155,9 +156,10 @@ def physics_build(target: str, kind: int, fresh: bool = False, law: int = -1) ->
     key = (target,) + variant_key(check_kind(kind), law)
     if not fresh and key in _BUILDS:
         return _BUILDS[key]
-    b = _physics_build(target, kind, law)
-    if not fresh:
-        _BUILDS[key] = b
+    with compiling():  # (a Ctrl-C is held while numba loads and the copies are made, and kept: backends/interrupts.py)
+        b = _physics_build(target, kind, law)
+        if not fresh:
+            _BUILDS[key] = b
     return b
 
 

@@ -36,6 +36,8 @@ from __future__ import annotations
 import os
 import threading
 
+from .interrupts import compiling
+
 PARALLEL_LOCK = threading.RLock()  # held around every call of a compiled parallel (prange) function
 WAIT_POLICY = "passive"
 # pennies per call below which the loop runs on the calling thread: waking OpenMP's sleeping threads took
@@ -108,8 +110,19 @@ def locked(f, serial=None, count=None):
             built.append(serial())
         return built[0]
 
+    warm = set()  # the paths ("serial", "parallel") called once: their first call compiles (or loads) them
+
     def call(*args):
-        if serial is not None and (_FORKED_AFTER_OPENMP or count(args) < SERIAL_BELOW):
+        path = "serial" if serial is not None and (_FORKED_AFTER_OPENMP or count(args) < SERIAL_BELOW) else "parallel"
+        if path not in warm:
+            with compiling():  # (a Ctrl-C is held until the compile is done, and raised once it is kept: interrupts.py)
+                out = run(path, args)
+                warm.add(path)
+            return out
+        return run(path, args)
+
+    def run(path, args):
+        if path == "serial":
             return serial_function()(*args)
         with PARALLEL_LOCK:
             return f(*args)
@@ -118,4 +131,5 @@ def locked(f, serial=None, count=None):
     # for a caller whose batch is always smaller than SERIAL_BELOW: the serial function, called directly
     # (right in a forked child too), saves the check and the lock on every call
     call.serial = serial_function if serial is not None else None
+    call.serial_built = lambda: tuple(built)  # (the serial function where it is built: interrupts.overloads)
     return call

@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import SolverSettings
+from ..backends.interrupts import load_numba
 from ..physics.faults import warn_episode_fault
 from ..physics.validation import as_state, check_inside, real_array
 from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT
-from ..step.actions import check_actions  # noqa: F401 (the envs check actions with it)
 from ..step.config import ConfigError
 from ..step.draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
 from .scene import Scene, Task
@@ -85,6 +85,8 @@ class Core:
         self.impacts = self.counts_arc  # (the name the renderer and the info use)
         self.obs_dim = self.task_record.obs_dim
         self.max_steps = task.max_episode_steps
+        if backend != "python":
+            load_numba()  # (with Ctrl-C held: backends/interrupts.py)
         self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
         self.ax, self.ay = scene.spawn_axes()
 

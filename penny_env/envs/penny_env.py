@@ -10,13 +10,15 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from ..backends.cache import announce_compile
+from ..backends.interrupts import compiling
 from ..backends.packing import pack
 from ..physics.scalar import impact_buffers, scalar_model
-from .core import Core, check_actions, check_seed, render_fps, seed_keys, warn_limits
-from ..step.functional import LIMIT_ACTION, LIMIT_LAW_NONFINITE, env_params, kinetic_energy
+from .core import Core, check_seed, render_fps, seed_keys, warn_limits
+from ..step.functional import LIMIT_ACTION, LIMIT_LAW_NONFINITE, check_actions, env_params, kinetic_energy
 from .limits import check_int64, check_memory, single_env_bytes
 from .scene import resolve
 
+_WARM: set = set()  # the entry points (backends/env.EnvEntryPoints) called once in this process
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
 MAX_IMPACTS_IN_INFO = 8  # width of info["impact_times"] / ["impact_ends"] (as PennyVectorEnv's rows)
 
@@ -203,10 +205,13 @@ class PennyEnv(gym.Env):
         if core.backend == "numba":  # load the machine code now, not in the first step
             announce_compile("single env step", "open plane" if core.table is None else type(core.table).__name__,
                              self._m.kind, self._fns.env_step)
-            obs = np.empty((1, core.obs_dim), dtype=np.float32)
-            s, trig, target, arc, d = self._fns.initial_state(np.uint64(0), 0, self._consts, obs)
-            self._fns.observe_state((s, trig, target, arc, 0, d, 0, 0.0), self._consts, obs)
-            self._fns.env_step((s, trig, target, arc, 0, d, 0, 0.0), 0.0, 0.0, self._consts, obs, self._buf_args)
+            if self._fns not in _WARM:  # the first build of these entry points in this process compiles (or loads) them
+                with compiling():  # (a Ctrl-C is held until that is done: backends/interrupts.py)
+                    obs = np.empty((1, core.obs_dim), dtype=np.float32)
+                    s, trig, target, arc, d = self._fns.initial_state(np.uint64(0), 0, self._consts, obs)
+                    self._fns.observe_state((s, trig, target, arc, 0, d, 0, 0.0), self._consts, obs)
+                    self._fns.env_step((s, trig, target, arc, 0, d, 0, 0.0), 0.0, 0.0, self._consts, obs, self._buf_args)
+                    _WARM.add(self._fns)
 
     def _buffers(self, capacity):
         """The step's impact buffers (scalar.ImpactBuffers, one penny with ``capacity`` slots), and the plain

@@ -9,13 +9,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..backends.cache import announce_compile
+from ..backends.interrupts import load_numba
 from ..backends.choice import compiles
 from ..backends.packing import pack
-from ..backends.threads import SERIAL_BELOW
+from ..backends.runner import CpuRunner, new_state
 from ..physics.scalar import scalar_model
-from .core import Core, check_actions, check_seed, render_fps, seed_keys, warn_limits, X, Y
-from ..step.functional import (DISABLED, LIMIT_LAW_NONFINITE, NEXT_STEP, SAME_STEP, EnvState,
-                         env_params, kinetic_energy)
+from .core import Core, check_seed, render_fps, seed_keys, warn_limits, X, Y
+from ..step.functional import DISABLED, LIMIT_LAW_NONFINITE, NEXT_STEP, SAME_STEP, env_params
 from .limits import check_int64, check_memory, vector_env_bytes
 from .scene import resolve
 
@@ -161,7 +161,6 @@ class PennyVectorEnv(VectorEnv):
         self._setup()
 
     def _setup(self):
-        self._arc_scratch = None  # the step's arc counts and guard faults (reused: the info returns neither)
         self._trails = None
         c = self._make_core()
         n = self.num_envs
@@ -170,27 +169,25 @@ class PennyVectorEnv(VectorEnv):
         self.single_observation_space = spaces.Box(lo, hi, dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, n)
         self.observation_space = batch_space(self.single_observation_space, n)
-        self._st = None          # the envs' functional.EnvState (numpy; on a GPU the device holds it)
+        self._started = False    # a first reset has drawn every env's episode
         self._renderers = None
-        self._true = np.ones(n, dtype=bool)
         self._in_step = False
-        self._limits = None  # the last step's info["limit"] (CPU): DISABLED's guard faults are reported at reset()
+        self._limits = None  # the last step's info["limit"] (host outputs): guard faults are warned as the envs reset
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        for key in ("_core", "_fns", "_p", "_m", "_consts", "_gpu", "_step_envs"):
+        for key in ("_core", "_fns", "_p", "_m", "_consts", "_runner"):
             state.pop(key)
-        state["_arc_scratch"] = None
-        if self._gpu is not None and self._st is not None:  # the device's state travels as host arrays
-            state["_st"] = self._gpu.state_to_host()
+        state["_host_state"] = self._runner.state_to_host() if self._started else None
         state["_renderers"] = None
         return state
 
     def __setstate__(self, state):
+        host = state.pop("_host_state")
         self.__dict__.update(state)
         self._make_core()
-        if self._gpu is not None and self._st is not None:
-            self._gpu.state_from_host(self._st)
+        if host is not None:
+            self._runner.state_from_host(host)
 
     def _make_core(self):
         on_gpu = self._on_gpu()
@@ -204,20 +201,21 @@ class PennyVectorEnv(VectorEnv):
         self._p = env_params(core, autoreset=AUTORESET_CODES[self.autoreset_mode])
         self._m = scalar_model(core.params, core.table, core.law, core.settings)
         self._consts = pack(self._p, self._m, core.k)
-        self._gpu = None
+        n, K = self.num_envs, self.max_impacts_in_info
         if on_gpu:
             from ..backends.cuda_env import DeviceStep
-            outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
             from ..backends.env import FAST_MAX_REGISTERS
+            outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
             self._fns = core.entry_points("cuda", max_registers=self.cuda_options.get("max_registers", FAST_MAX_REGISTERS))
-            self._gpu = DeviceStep(self, self.device, outputs, self.cuda_options.get("kernels", "split"))
+            self._runner = DeviceStep(self._fns, self._consts, self._p, self._m, core, n, K, self.device, outputs,
+                                      self.cuda_options.get("kernels", "split"))
             return core
         self._fns = core.entry_points()
-        # fewer envs than threads.SERIAL_BELOW: the serial loop, called directly (threads.locked)
-        serial = getattr(self._fns.step_envs, "serial", None)
-        self._step_envs = serial() if serial is not None and self.num_envs < SERIAL_BELOW else self._fns.step_envs
-        if core.backend == "numba":
-            self._warm_up()
+        self._runner = CpuRunner(self._fns, self._consts, self._p, n, K, core.obs_dim, core.n_act, core.counts_arc)
+        if core.backend == "numba":  # the machine code loaded (or compiled) now, not inside a step or a reset
+            announce_compile("vector env step", "open plane" if core.table is None else type(core.table).__name__,
+                             self._m.kind, self._fns.step_envs.__wrapped__)
+            self._runner.warm_up()  # (its loops' first calls hold Ctrl-C while they compile: threads.locked)
         return core
 
     def _on_gpu(self) -> bool:
@@ -235,53 +233,9 @@ class PennyVectorEnv(VectorEnv):
             return True
         if self.backend != "auto" or importlib.util.find_spec("numba_cuda") is None:
             return False
+        load_numba()  # (with Ctrl-C held: backends/interrupts.py)
         import numba
         return not numba.config.ENABLE_CUDASIM and cuda_available()
-
-    def _new_state(self, n):
-        """A zeroed functional.EnvState of n envs (numpy)."""
-        return EnvState(np.zeros((6, n)), np.zeros((4, n)), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n, dtype=np.int64),
-                        np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=np.uint64),
-                        np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool))
-
-    def _outputs(self, n):
-        """Fresh step outputs (functional.StepResults' arrays as a plain tuple) and impact buffers: new arrays
-        each step on the CPU, so that the caller may keep them. The impact slots are (n, K) arrays handed to
-        the loop transposed ((K, n): scalar.ImpactBuffers' layout), so each env's slots stay together; their
-        counts start at K, so the step pads every slot (functional.step_env clears what a row held)."""
-        c, K = self._core, self.max_impacts_in_info
-        if self._arc_scratch is None or self._arc_scratch[0].shape[0] != n:
-            # reused from step to step (the info returns none of them; a fresh array costs about 0.2 us, a fifth
-            # of the step's host time at N = 1): the arc counts and guard faults, the done flags, the empty
-            # post-impact states and rest flags (the env does not keep them), SAME_STEP's final observations
-            final = (n if self.autoreset_mode == AutoresetMode.SAME_STEP else 0, c.obs_dim)
-            self._arc_scratch = (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8), np.empty(n, dtype=bool),
-                                 np.empty((0, 6, n)), np.empty((0, n), dtype=np.int8), np.empty(final, dtype=np.float32),
-                                 np.full(n, K, dtype=np.int64), np.empty(n, dtype=np.int64))
-        arc, fault, done, post, rest, final, full, arc_total = self._arc_scratch
-        # new arrays each step for what the step returns, so that the caller may keep them
-        out = (np.empty((n, c.obs_dim), dtype=np.float32), np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool),
-               np.empty(n), np.empty(n, dtype=np.int8), np.empty(n), np.empty(n),
-               np.empty(n, dtype=np.int64) if c.counts_arc else arc_total, final, done)  # (arc_total: not buf's arc)
-        times, ends = np.empty((n, K)), np.empty((n, K), dtype=np.int8)
-        buf = (full.copy(), times.T, ends.T, post, rest, arc, fault)  # (a copy: np.full costs 0.7 us, a copy 0.1)
-        return out, buf, times, ends
-
-    def _warm_up(self):
-        """Load the machine code (or compile it) now rather than in the first step."""
-        c = self._core
-        announce_compile("vector env step", "open plane" if c.table is None else type(c.table).__name__, self._m.kind,
-                         self._fns.step_envs.__wrapped__)
-        from ..backends.threads import SERIAL_BELOW, serial_now
-        # both loops: one penny runs on the calling thread, SERIAL_BELOW in parallel (not in a forked child)
-        for n in (1,) if serial_now() else (1, SERIAL_BELOW):
-            st = tuple(self._new_state(n))
-            obs = np.empty((n, c.obs_dim), dtype=np.float32)
-            rows = np.arange(n)
-            self._fns.reset_rows(rows, st, self._consts, obs)
-            self._fns.observe_rows(rows, st, self._consts, obs)
-            out, buf, _, _ = self._outputs(n)
-            self._fns.step_envs(st, np.zeros((n, c.n_act)), self._consts, out, buf)
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -302,7 +256,7 @@ class PennyVectorEnv(VectorEnv):
             if len(seed) != n:
                 raise ValueError(f"seed must be an int, None or a list of {n} seeds, got {len(seed)} seeds")
         c = self._core
-        mask = self._true.copy()
+        mask = np.ones(n, dtype=bool)
         states = targets = None
         if options is not None:
             states, targets = c.check_options(options, n, extra=("reset_mask",))
@@ -312,18 +266,18 @@ class PennyVectorEnv(VectorEnv):
                     raise TypeError(f"options['reset_mask'] must be a bool array, got dtype {mask.dtype}")
                 if mask.shape != (n,):
                     raise ValueError(f"options['reset_mask'] must have shape ({n},), got {mask.shape}")
-                if self._st is None and not mask.all():
+                if not self._started and not mask.all():
                     raise ResetNeeded("the first reset must reset every env")
                 if self._in_step and not mask.all():
                     raise ResetNeeded("the previous step or reset was interrupted: reset every env (no reset_mask)")
         if self._limits is not None and self.autoreset_mode == AutoresetMode.DISABLED:
-            self._warn_faults(self._limits[mask])  # guard faults of the episodes this reset ends
+            warn_limits(self._core, np.unique(self._limits[mask]))  # guard faults of the episodes this reset ends
         self._limits = None
         # from here on the envs change: guarded as a step is (the flag is cleared once every row is whole)
         self._in_step = True
         super().reset(seed=seed if int_seed else None)
-        first = self._st is None
-        host = self._new_state(n) if first else (self._gpu.state_to_host() if self._gpu is not None else self._st)
+        first = not self._started
+        host = new_state(n) if first else self._runner.state_to_host()
         keys, episodes = host.key.copy(), host.episode.copy()
         if first:
             keys[:] = seed_keys(self.np_random.integers(0, 2**63, size=n))
@@ -336,76 +290,50 @@ class PennyVectorEnv(VectorEnv):
             keys[mask] = seed_keys([s for s, m in zip(given, mask) if m])
             episodes[mask] = 0
         rows = np.flatnonzero(mask)
-        K = self.max_impacts_in_info  # the step's info keys and shapes (TorchRL reads specs from them)
+        obs, out = self._runner.reset(keys, episodes, rows, states, targets)
+        self._started = True
         if first:
             self._trails = [[] for _ in range(n)] if self.render_mode else None
-        if self._gpu is not None:
-            obs, info = self._gpu.reset(host, rows, keys, episodes, states, targets)
-            self._st = True  # (the device holds the state)
-            if self._trails is not None:
-                S = self._gpu.host("S")
-                for i in rows:
-                    self._trails[i] = [(S[X, i], S[Y, i])]
-            self._in_step = False  # (last: every row whole)
-            return obs, info
-        if first:
-            self._st = host
-        st = self._st
-        st.key[:], st.episode[:] = keys, episodes
-        st.pending[rows] = False
-        obs = np.empty((n, c.obs_dim), dtype=np.float32)
-        self._fns.reset_rows(rows, tuple(st), self._consts, obs)
-        if states is not None or targets is not None:
-            if states is not None:
-                st.S[:, rows] = states[rows].T
-            if targets is not None:
-                st.target[:, rows] = targets[rows].T
-            self._fns.observe_rows(rows, tuple(st), self._consts, obs)
-        others = np.flatnonzero(~mask)
-        if others.size:  # the envs outside a reset_mask keep their state; their observation as it is
-            self._fns.observe_rows(others, tuple(st), self._consts, obs)
         if self._trails is not None:
+            S = self._runner.host("S")
             for i in rows:
-                self._trails[i] = [(st.S[X, i], st.S[Y, i])]
-        info = self._info(np.zeros(n, dtype=np.int64), np.full((n, K), np.nan), np.zeros((n, K), dtype=np.int8),
-                          kinetic_energy(st.S, self._p), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int8),
-                          st.time.copy(), st.dist.copy(), st.count.copy())
+                self._trails[i] = [(S[X, i], S[Y, i])]
+        info = self._info(out)
         self._in_step = False  # (last: every row whole)
         return obs, info
 
     def step(self, actions):
-        if self._st is None:
+        if not self._started:
             raise ResetNeeded("PennyVectorEnv.step() called before reset()")
         if self._in_step:
             raise ResetNeeded("PennyVectorEnv.step(): the previous step() or reset() was interrupted (an exception such "
                               "as KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
-        if self._gpu is not None:
-            return self._gpu.step(actions)
-        n = self.num_envs
-        c = self._core
-        a = check_actions(actions, (n, c.n_act), "actions")  # the step clips, as PennyEnv does
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+        runner = self._runner
+        runner.load_actions(actions)  # checked before anything changes (TypeError / ValueError naming the sub-env)
+        if self._limits is not None and self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._warn_faults(self._limits)  # the guard faults of the episodes this step resets
-        out, buf, times, ends = self._outputs(n)
-        # from here to the end of the loop the step's bookkeeping must run whole (class docstring)
+        # from here to the end of the runner's step the bookkeeping must run whole (class docstring)
         self._in_step = True
-        self._step_envs(tuple(self._st), a, self._consts, out, buf)
+        out = runner.step()
         self._in_step = False
-        obs, rew, term, trunc, energy, limit, time, dist, count, final_obs, done = out
+        res = out.results
         self._extend_trails()
-        info = self._info(buf[0], times, ends, energy, term, limit, time, dist, count)
-        self._limits = limit
-        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
-            self._warn_faults(limit[done])
-            self._final_info(info, final_obs, done, term)
-        return obs, rew, term, trunc, info
+        info = self._info(out)
+        if runner.outputs == "numpy":
+            self._limits = res.limit
+            if self.autoreset_mode == AutoresetMode.SAME_STEP and res.ended.any():
+                self._warn_faults(res.limit[res.ended])
+                info.update(self._final_entries(res.final_obs.copy(), res.ended.copy(), res.terminated))
+        elif self.autoreset_mode == AutoresetMode.SAME_STEP:  # (device outputs: which envs ended is not read here)
+            info.update(self._final_entries(res.final_obs, res.ended, res.terminated))
+        return res.obs, res.reward, res.terminated, res.truncated, info
 
     def _warn_faults(self, limits):
-        """A warning for the episodes that the event loop's guard ended (physics/faults.py), one per kind, as
-        those envs reset (NEXT_STEP: the next step; SAME_STEP: this step; DISABLED: the reset); info["limit"]
-        names every one of them. (The CUDA backend leaves it to info["limit"]: a warning would need the host to
-        read the limits each step.)"""
-        if limits is None or not limits.size:
+        """A warning for the episodes that a guard ended (the event loop's, physics/faults.py, or the task's outputs':
+        core.warn_limits), one per kind, as those envs reset (NEXT_STEP: the next step; SAME_STEP: this step;
+        DISABLED: the reset); info["limit"] names every one of them. (Device outputs leave it to info["limit"]: a
+        warning would need the host to read the limits each step.)"""
+        if not limits.size:
             return
         # the usual case, no fault, in one pass (a numpy reduction costs about 1 us at any size; a few envs' bytes
         # are scanned faster by Python's max over the bytes)
@@ -413,74 +341,66 @@ class PennyVectorEnv(VectorEnv):
             return
         warn_limits(self._core, np.unique(limits[limits >= LIMIT_LAW_NONFINITE]))
 
-    def _final_info(self, info, final_obs, done, terminated):
-        """SAME_STEP autoreset: the last obs and info of the envs whose episode ended (SB3-style object arrays
-        of rows) in info["final_obs"] / info["final_info"]."""
-        n = self.num_envs
-        obs_rows = np.empty(n, dtype=object)
-        info_rows = np.empty(n, dtype=object)
-        for i in np.flatnonzero(done):
-            obs_rows[i] = final_obs[i].copy()
-            info_rows[i] = {"is_success": bool(terminated[i])}
-        info["final_obs"], info["_final_obs"] = obs_rows, done.copy()
-        info["final_info"], info["_final_info"] = info_rows, done.copy()
+    def _info(self, out) -> dict:
+        """The info of a step or a reset, from the runner's outputs in their own array type (numpy, torch or numba
+        device arrays): the same keys and shapes on every step and reset, each with its ``_key`` mask."""
+        res = out.results
+        mask = self._runner.mask
+        info = {"impacts": out.counts, "_impacts": mask(), "impact_times": out.times, "_impact_times": mask(),
+                "impact_ends": out.ends, "_impact_ends": mask(), "kinetic_energy": res.kinetic_energy,
+                "_kinetic_energy": mask(), "time": res.time, "_time": mask(), "distance": res.dist, "_distance": mask(),
+                "is_success": res.terminated, "_is_success": mask(), "limit": res.limit, "_limit": mask()}
+        if self._core.counts_arc:
+            info["arc_impacts"] = res.arc_count
+            info["_arc_impacts"] = mask()
+        return info
+
+    @staticmethod
+    def _final_entries(final_obs, ended, terminated) -> dict:
+        """SAME_STEP autoreset, Gymnasium's keys: the last observation of the envs whose episode ended (rows of
+        ``final_obs``, masked by ``_final_obs``) and their final info (``{"is_success": ..., "_is_success": ...}``,
+        masked by ``_final_info``)."""
+        return {"final_obs": final_obs, "_final_obs": ended, "final_info": {"is_success": terminated, "_is_success": ended},
+                "_final_info": ended}
 
     def _extend_trails(self):
         if self._trails is not None:
-            S = self._st.S if self._gpu is None else self._gpu.host("S")
+            S = self._runner.host("S")
             for i in range(self.num_envs):
                 self._trails[i].append((S[X, i], S[Y, i]))
                 del self._trails[i][:-200]
 
-    def _info(self, counts, times, ends, energy, success, limit, time, dist, count):
-        t = self._true
-        info = {"impacts": counts, "_impacts": t.copy(), "impact_times": times, "_impact_times": t.copy(),
-                "impact_ends": ends, "_impact_ends": t.copy(), "kinetic_energy": energy,
-                "_kinetic_energy": t.copy(), "time": time, "_time": t.copy(), "distance": dist,
-                "_distance": t.copy(), "is_success": success.copy() if isinstance(success, np.ndarray) else success,
-                "_is_success": t.copy(), "limit": limit,
-                "_limit": t.copy()}
-        if self._core.counts_arc:
-            info["arc_impacts"] = count
-            info["_arc_impacts"] = t.copy()
-        return info
-
     @property
     def array_namespace(self) -> str:
         """"torch" where the step returns torch tensors (the CUDA backend's default outputs), else "numpy"."""
-        return "torch" if getattr(self, "_gpu", None) is not None and self._gpu.outputs == "torch" else "numpy"
+        return "torch" if self._runner.outputs == "torch" else "numpy"
 
     # -- state access ---------------------------------------------------------------------
     @property
     def states(self) -> np.ndarray:
         """(num_envs, 6) copy of the pennies' states (x, y, theta, phi, theta_dot, phi_dot), numpy."""
-        if self._st is None:
+        if not self._started:
             raise ResetNeeded("call reset() first")
-        if self._gpu is not None:
-            return self._gpu.host("S").T.copy()
-        return self._st.S.T.copy()
+        return self._runner.host("S").T.copy()
 
     @property
     def targets(self) -> np.ndarray:
-        if self._st is None:
+        if not self._started:
             raise ResetNeeded("call reset() first")
-        if self._gpu is not None:
-            return self._gpu.host("target").T.copy()
-        return self._st.target.T.copy()
+        return self._runner.host("target").T.copy()
 
     def render(self):
         """Frames of the sub-envs (a tuple of uint8 arrays) in render_mode "rgb_array"."""
         if self.render_mode is None:
             gym.logger.warn("PennyVectorEnv.render() called without render_mode='rgb_array'")
             return None
-        if self._st is None:
+        if not self._started:
             raise ResetNeeded("PennyVectorEnv.render() called before reset()")
         from .rendering import Renderer
         if self._renderers is None:
             self._renderers = Renderer(self._core, "rgb_array", self.metadata["render_fps"])
         r = self._renderers
-        S, target, arc = (self._st.S, self._st.target, self._st.arc) if self._gpu is None else \
-            (self._gpu.host("S"), self._gpu.host("target"), self._gpu.host("arc"))
+        S, target, arc = (self._runner.host(name) for name in ("S", "target", "arc"))
         return tuple(r.frame(tuple(S[:, i]), tuple(target[:, i]), self._trails[i], tuple(arc[:, i]))
                      for i in range(self.num_envs))
 

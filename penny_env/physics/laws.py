@@ -185,6 +185,10 @@ def builtin_law_indices() -> tuple:
 _register(LawRecord("elastic", restitution_update, 1.0, restitution_jacobian, True))
 _register(LawRecord("restitution", restitution_update, 1.0, restitution_jacobian))  # (e = 1 is "elastic")
 _register(LawRecord("plastic", plastic_update, 0.0, plastic_jacobian))
+# penny_env's own laws are kernels.law_update with the plastic flag off or on: COMPILED_LAWS[0] and [1]
+BUILTIN_LAW_UPDATES = (restitution_update, plastic_update)
+PLASTIC_LAW = 1
+assert tuple(COMPILED_LAWS) == BUILTIN_LAW_UPDATES
 
 
 @dataclass(frozen=True)

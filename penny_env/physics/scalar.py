@@ -40,11 +40,11 @@ from .flows import (CIS_MEDIUM, CIS_SMALL, MAX_PHASE_PER_PANEL, RULE_CIS, RULE_C
                    RULE_WEIGHTS, phase_sweep)
 from .faults import FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, FAULT_OUTSIDE, FAULT_OUTWARD, OUTSIDE_TOL, fault_error
 from .law_checks import ENERGY_RTOL, OUTWARD_RTOL
-from .laws import COMPILED_LAWS, law_index
+from .laws import BUILTIN_LAW_UPDATES, COMPILED_LAWS, PLASTIC_LAW, law_index
 from .tables.base import COMPILED_FORMULAS, N_CONSTANTS, compiled_kind
 from .kernels import (SCALAR, acceleration_bound, angles_at, cis_medium, cis_small, curvature_bounds, curvature_step,
-                      displacement_closed, end_point, local_curvature, motion_bounds, newton_polish, search_step,
-                      time_resolution)
+                      displacement_closed, end_point, law_update, local_curvature, motion_bounds, newton_polish,
+                      search_step, time_resolution)
 
 
 OTHER = -1  # Model.kind of a table called through its methods (plain Python only); else an index
@@ -146,7 +146,11 @@ def wall_distance_bisection(m, c, s):
 
 
 def law_terms(m, W, w, a, b, grad2):
-    """The law's post-impact (theta_dot, phi_dot) for the normal form n = a W + b w (laws.py)."""
+    """The law's post-impact (theta_dot, phi_dot) for the normal form n = a W + b w (laws.py): penny_env's own
+    laws are the formula kernels.law_update itself (restitution, or the plastic law), a user's law its function.
+    (The compiled builds replace this by a generated dispatch: backends/physics.py.)"""
+    if m.law < len(BUILTIN_LAW_UPDATES):
+        return law_update(W, w, a, b, grad2, m.e, m.law == PLASTIC_LAW, m.Itot, m.J, m.m, SCALAR)
     return COMPILED_LAWS[m.law](W, w, a, b, grad2, m.e, m.Itot, m.J, m.m)
 
 

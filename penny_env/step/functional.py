@@ -34,8 +34,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..physics.kernels import SCALAR
 from ..physics.faults import FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, FAULT_OUTSIDE, FAULT_OUTWARD
+from ..physics.kernels import SCALAR
+from ..physics.numbers import real_array
 from ..physics.scalar import NO_ARC, Model, clear_row, run_interval
 from .draws import draw_stream, draw_uniform
 
@@ -216,6 +217,28 @@ def initial_state(key, episode, p, m, k):
     trig = angle_trig(s)
     tx, ty, cb, sb = task_target(k, p, m, s, trig, base, XP)  # noqa: F821 (the task's, in the build's namespace)
     return PennyState(s, trig, (tx, ty), (cb, sb), 0, distance(s, (tx, ty)), 0, 0.0)
+
+
+def check_actions(actions, shape, name="action"):
+    """Stage "action" on the host, before a step changes anything: a float64 array of the given shape from
+    actions; a TypeError for a wrong type (strings, None, bools, complex numbers, objects), a ValueError naming
+    the sub-env(s) for a wrong shape or non-finite entries. Nothing is clipped here (:func:`actuate` clips)."""
+    if isinstance(actions, np.ndarray) and actions.dtype.kind == "f":  # (the usual case, without the entry-wise checks)
+        arr = np.array(actions, dtype=np.float64)
+    else:
+        arr = real_array(actions, name, "an array")  # also finds a bool or string inside a list
+    if arr.shape != shape:
+        if len(shape) == 2 and shape[1] == 1 and arr.shape == shape[:1]:
+            arr = arr[:, None]
+        else:
+            raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
+    finite = np.isfinite(arr)
+    if not finite.all():
+        if arr.ndim == 1:
+            raise ValueError(f"{name} has a non-finite entry: {arr.tolist()}")
+        bad = np.flatnonzero(~finite.all(axis=1))
+        raise ValueError(f"{name}: non-finite action in sub-env(s) {bad[:10].tolist()}{' ...' if bad.size > 10 else ''}")
+    return np.ascontiguousarray(arr)
 
 
 def actuate(a0, a1, p):
@@ -430,17 +453,17 @@ def same_step_reset(st, i, p, m, k, out):
     write_observation(obs, i, fresh, p, k)
 
 
-def finish_env(st, i, new, r, te, tu, e, lim, p, m, k, out):
-    """Env i's step results stored (state, outputs) and the autoreset's bookkeeping: NEXT_STEP marks an ended
-    episode for reset at the next step, SAME_STEP resets it now."""
+def record_step(st, i, new, r, te, tu, e, lim, p, out):
+    """Env i's step results stored (state, outputs) and the autoreset's bookkeeping, written once for every target:
+    NEXT_STEP marks an ended episode for reset at the next step; the result is True where SAME_STEP resets the
+    ended episode now (the caller does: :func:`same_step_reset` on the CPU, the rare kernel on CUDA)."""
     pending = st[10]
     write_state(st, i, new)
     write_outputs(out, i, new, r, te, tu, e, lim)
     done = te or tu
     if p.autoreset == NEXT_STEP:
         pending[i] = done
-    elif p.autoreset == SAME_STEP and done:
-        same_step_reset(st, i, p, m, k, out)
+    return p.autoreset == SAME_STEP and done
 
 
 def step_env(i, st, actions, p, m, k, out, buf):
@@ -468,7 +491,9 @@ def step_env(i, st, actions, p, m, k, out, buf):
             e = kinetic_energy(st_i.s, p)
             lim = LIMIT_ACTION
             write_observation(obs, i, new, p, k)
-        finish_env(st, i, new, r, te, tu, e, lim, p, m, k, out)
+        reset_now = record_step(st, i, new, r, te, tu, e, lim, p, out)
+        if reset_now:
+            same_step_reset(st, i, p, m, k, out)
 
 
 def step_envs(st, actions, p, m, k, out, buf):

@@ -41,7 +41,7 @@ def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernel
     for k in range(steps):
         a = np.clip(rng.normal(0.6, 0.5, (n, cpu.single_action_space.shape[0])), -1, 1)
         if one_set:
-            gpu._gpu.parity = 0
+            gpu._runner.parity = 0
         rc, rg = cpu.step(a), gpu.step(a)
         assert rel_close(rc[0], rg[0]) and rel_close(rc[1], rg[1]), f"step {k}: observations or rewards differ"
         assert np.array_equal(rc[2], rg[2]) and np.array_equal(rc[3], rg[3]), f"step {k}: flags differ"

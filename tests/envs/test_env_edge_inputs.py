@@ -85,11 +85,11 @@ def test_interrupted_vector_step_needs_a_reset(backend):
     vec.reset(seed=0)
     a = np.zeros((3, 2), np.float32)
     vec.step(a)
-    step_envs = vec._step_envs  # (the loop the step calls: the serial one, for 3 envs)
-    vec._step_envs = _interrupting(step_envs, lambda: None)
+    step_envs = vec._runner.step_envs  # (the loop the step calls: the serial one, for 3 envs)
+    vec._runner.step_envs = _interrupting(step_envs, lambda: None)
     with pytest.raises(KeyboardInterrupt):
         vec.step(a)  # the kernel ran (each episode reached its 2 steps) but the autoreset flags were not set
-    vec._step_envs = step_envs
+    vec._runner.step_envs = step_envs
     with pytest.raises(ResetNeeded, match="interrupted"):
         vec.step(a)
     with pytest.raises(ResetNeeded, match="interrupted"):
@@ -97,7 +97,7 @@ def test_interrupted_vector_step_needs_a_reset(backend):
     vec.reset(seed=0)
     for _ in range(2):
         _, _, _, trunc, _ = vec.step(a)
-    assert trunc.all() and np.all(vec._st.steps == 2)
+    assert trunc.all() and np.all(vec._runner.st.steps == 2)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

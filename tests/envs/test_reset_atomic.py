@@ -26,10 +26,12 @@ STAGES_SINGLE = [("initial_state", lambda env: (env._fns, "initial_state")),
 
 
 def _interrupt_entry(monkeypatch, env, name):
-    """env's entry point ``name`` (backends/env.EnvEntryPoints, a record) replaced by one that raises KeyboardInterrupt."""
+    """env's entry point ``name`` (backends/env.EnvEntryPoints, a record: the single env's, or the vector env's
+    runner's) replaced by one that raises KeyboardInterrupt."""
     def boom(*args, **kwargs):
         raise KeyboardInterrupt
-    monkeypatch.setattr(env, "_fns", env._fns._replace(**{name: boom}))
+    holder, attr = (env._runner, "fns") if hasattr(env, "_runner") else (env, "_fns")
+    monkeypatch.setattr(holder, attr, getattr(holder, attr)._replace(**{name: boom}))
 
 
 @pytest.mark.parametrize("stage", [s for s, _ in STAGES_SINGLE])
@@ -119,13 +121,13 @@ def test_a_refused_vector_reset_changes_nothing():
     env = PennyVectorEnv(n, "ellipse", "reach", backend="python")
     env.reset(seed=1)
     env.step(np.full((n, 2), 0.4))
-    before = (env.states.tolist(), env.targets.tolist(), env._st.episode.tolist(), env._st.key.tolist(),
+    before = (env.states.tolist(), env.targets.tolist(), env._runner.st.episode.tolist(), env._runner.st.key.tolist(),
               env.np_random.bit_generator.state)
     for kwargs in ({"seed": [1, 2]}, {"options": {"state": np.full(6, 9.0)}},
                    {"options": {"reset_mask": np.array([1, 0, 1])}}, {"seed": 2, "options": {"bad": 0}}):
         with pytest.raises((ValueError, TypeError)):
             env.reset(**kwargs)
-        assert (env.states.tolist(), env.targets.tolist(), env._st.episode.tolist(), env._st.key.tolist(),
+        assert (env.states.tolist(), env.targets.tolist(), env._runner.st.episode.tolist(), env._runner.st.key.tolist(),
                 env.np_random.bit_generator.state) == before
     env.step(np.full((n, 2), 0.4))
 
@@ -134,11 +136,11 @@ def test_the_reset_flag_is_cleared_only_when_every_row_is_whole(monkeypatch):
     # (the rows' state, trig and observation, which the step's impact certificate reads, are written by reset_rows)
     env = PennyVectorEnv(2, "circle", "reach", backend="python")
     calls = []
-    real = env._fns.reset_rows
+    real = env._runner.fns.reset_rows
 
     def spy(*args):
         calls.append(env._in_step)
         return real(*args)
-    monkeypatch.setattr(env, "_fns", env._fns._replace(reset_rows=spy))
+    monkeypatch.setattr(env._runner, "fns", env._runner.fns._replace(reset_rows=spy))
     env.reset(seed=0)
     assert calls == [True] and env._in_step is False

@@ -105,7 +105,7 @@ def test_impacts_per_step_are_capped_and_end_the_episode():
             break
     assert info["limit"] == functional.LIMIT_IMPACTS and info["impacts"] == CAP and most == CAP
     assert info["time"] < (k + 1) * 10.0 and info["impact_times"][-1] == pytest.approx(info["time"] - k * 10.0, abs=1e-9)
-    assert np.array_equal(vec._st.time, [info["time"]] * 2)
+    assert np.array_equal(vec._runner.st.time, [info["time"]] * 2)
 
 
 @pytest.mark.parametrize("env_id", sorted(env_presets()))
@@ -134,9 +134,9 @@ def test_adversarial_actions_keep_every_step_within_the_limits(env_id):
                 a[1] *= -1.0
             acc1 = a[:, 0] * vec._p.gain1 if 0 in c.controls else np.zeros(2)
             acc2 = a[:, -1] * vec._p.gain2 if 1 in c.controls else np.zeros(2)
-            run = ~vec._st.pending  # (the others reset at this step)
+            run = ~vec._runner.st.pending  # (the others reset at this step)
             # raises a ValueError where the step's interval would pass MAX_ANGULAR_SPEED or MAX_STEERED_PHASE
-            S = vec._st.S
+            S = vec._runner.st.S
             check_speed_bound(S[:, run].copy(), acc1[run].astype(float), acc2[run].astype(float), c.dt, c.params,
                               env_id)
             before = np.sqrt(2 * (c.Itot * S[4] ** 2 + c.J * S[5] ** 2))

@@ -1,0 +1,65 @@
+"""Ctrl-C and the compiler: numba compiles a function at its first call for a signature, and llvmlite frees
+its objects in finalizers that Python's cycle collector runs at any later moment. A KeyboardInterrupt inside
+either corrupted LLVM's state: the process aborted ("free(): double free detected in tcache 2", llvmlite's
+``ffi.close`` in ``__del__``) when a thread sent SIGINT every 3 ms while a vector env stepped. So every place
+that may compile holds SIGINT until the compile is done (:func:`compiling`): the envs' warm-up when they are
+built, and the first call of each path of a compiled loop (threads.locked)."""
+from __future__ import annotations
+
+import contextlib
+
+
+@contextlib.contextmanager
+def compiling(collect=True):
+    """Around a compile (or a load from numba's cache) that a user's Ctrl-C could interrupt: SIGINT is held until the
+    block ends and then raised as KeyboardInterrupt, and the compiler's garbage (llvmlite objects in reference
+    cycles) is collected inside the block. A KeyboardInterrupt inside numba's compiler, or inside an llvmlite
+    object's finalizer run by a later collection in the middle of a step, corrupted LLVM's state: the process
+    aborted ("double free detected"). In a thread other than the main one (where Python delivers signals) the
+    block only collects. collect: False, no collection (an import); a function, collect where it says so (a
+    warm-up that may have found everything compiled already)."""
+    import gc
+    import signal
+    import threading
+    held = []
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main else None
+    if main and previous is signal.default_int_handler:
+        signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    else:
+        main = False
+    try:
+        yield
+        if collect is True or (callable(collect) and collect()):
+            gc.collect()
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+    if held:
+        raise KeyboardInterrupt
+
+
+def load_numba() -> None:
+    """numba imported (once per process) with Ctrl-C held: an import interrupted half way leaves numba's modules
+    broken for the rest of the process ("module 'numba' has no attribute 'core'"). The envs and the batch API call
+    it before they build anything compiled; ``import penny_env`` itself stays free of numba."""
+    import sys
+    if "numba.core.registry" in sys.modules:
+        return
+    with compiling(collect=False):
+        import numba  # noqa: F401
+        import numba.core.registry  # noqa: F401
+
+
+def overloads(*functions) -> int:
+    """How many signatures numba has compiled (or loaded) for ``functions`` (dispatchers, and threads.locked's
+    wrappers: their parallel dispatcher and the serial one where it is built): a warm-up that changed it made
+    the compiler's garbage, and collects it (:func:`compiling`)."""
+    total = 0
+    for f in functions:
+        for d in (f, getattr(f, "__wrapped__", None)):
+            total += len(getattr(d, "overloads", ()) or ())
+        serial = getattr(f, "serial_built", None)
+        if serial is not None:
+            total += sum(len(getattr(d, "overloads", ()) or ()) for d in serial())
+    return total

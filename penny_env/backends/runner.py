@@ -1,0 +1,175 @@
+"""The vector step's runners: one interface, behind which the CPU loop and the CUDA kernels sit.
+
+A runner holds the N envs' state (step/functional.EnvState) where its target computes (numpy arrays on the host;
+device arrays on a GPU: backends/cuda_env.DeviceStep) and runs the step built for its target
+(backends/env.EnvEntryPoints). PennyVectorEnv talks to every target through these methods only, and builds the
+info from what :meth:`step` and :meth:`reset` return, with one builder for every array type
+(envs/vector_env.py):
+
+====================================  =============================================================================
+``load_actions(actions)``             the actions checked (TypeError / ValueError naming the sub-env) and stored
+``step() -> StepOutputs``             one step of every env, autoreset included, in the runner's array type
+``reset(keys, episodes, rows,         episodes drawn for ``rows`` (reset options applied); (obs, StepOutputs of the
+states, targets)``                    reset's info)
+``mask()``                            an info mask of every env (``_key``), in the runner's array type
+``host(name)``                        a field of the state as a numpy array (a copy on a GPU)
+``state_to_host()``,                  the whole state as numpy arrays and back (pickling)
+``state_from_host(st)``
+``outputs``                           "numpy", "torch" or "device": the array type of what the runner returns
+====================================  =============================================================================
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..step.functional import SAME_STEP, EnvState, StepResults, check_actions, kinetic_energy
+from . import threads
+from .interrupts import compiling, overloads
+
+
+# -- the CPU loops' entry points (plain Python, copied into each build by backends/env.py): records from plain
+# tuples (numba unboxes a plain tuple several times faster than a NamedTuple), constants unpacked once per call
+def step_envs_packed(st, actions, consts, out, buf):
+    """The vector step (CPU and python): records from plain tuples, constants unpacked once."""
+    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
+    step_envs(EnvState(*st), actions, p, m, k, StepResults(*out), ImpactBuffers(*buf))  # noqa: F821
+
+
+def reset_rows_packed(rows, st, consts, obs):
+    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
+    reset_rows(rows, EnvState(*st), p, m, k, obs)  # noqa: F821
+
+
+def observe_rows_packed(rows, st, consts, obs):
+    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
+    observe_rows(rows, EnvState(*st), p, m, k, obs)  # noqa: F821
+
+
+class StepOutputs(NamedTuple):
+    """What a step (or a reset) returns: the per-env results (functional.StepResults) and the info's impact
+    arrays, counts (N,), times (N, K) and ends (N, K), in the runner's array type."""
+
+    results: StepResults
+    counts: object
+    times: object
+    ends: object
+
+
+def new_state(n: int) -> EnvState:
+    """A zeroed functional.EnvState of n envs (numpy)."""
+    return EnvState(np.zeros((6, n)), np.zeros((4, n)), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n, dtype=np.int64),
+                    np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n), np.zeros(n, dtype=np.uint64),
+                    np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool))
+
+
+def reset_outputs(obs, st: EnvState, p, K: int, xp=np) -> StepOutputs:
+    """The outputs a reset's info is built from: no impacts, the envs' energy, time, distance and arc count, in
+    the array namespace of ``st`` (numpy on the host)."""
+    n = st.S.shape[1]
+    z = np.zeros
+    results = StepResults(obs, z(n), z(n, dtype=bool), z(n, dtype=bool), kinetic_energy(st.S, p), z(n, dtype=np.int8),
+                          st.time.copy(), st.dist.copy(), st.count.copy(), None, z(n, dtype=bool))
+    return StepOutputs(results, z(n, dtype=np.int64), np.full((n, K), np.nan), z((n, K), dtype=np.int8))
+
+
+class CpuRunner:
+    """The vector step on the CPU: the compiled loop (numba, parallel over envs, serial below
+    threads.SERIAL_BELOW envs and in forked children) or the plain-Python one (backend "python"); the state in
+    numpy arrays. What a step returns is new arrays each step (the caller may keep them)."""
+
+    outputs = "numpy"
+
+    def __init__(self, fns, consts, p, n: int, K: int, obs_dim: int, n_act: int, counts_arc: bool):
+        self.fns, self.consts, self.p = fns, consts, p
+        self.n, self.K, self.obs_dim, self.n_act, self.counts_arc = n, K, obs_dim, n_act, counts_arc
+        self.same_step = p.autoreset == SAME_STEP
+        self.st = new_state(n)
+        self.actions = np.zeros((n, n_act))
+        serial = getattr(fns.step_envs, "serial", None)
+        # fewer envs than threads.SERIAL_BELOW: the serial loop, called directly (threads.locked)
+        self.step_envs = serial() if serial is not None and n < threads.SERIAL_BELOW else fns.step_envs
+        # reused from step to step (the info returns none of them; a fresh array costs about 0.2 us, a fifth of the
+        # step's host time at N = 1): the arc counts and guard faults, the done flags, the empty post-impact states
+        # and rest flags (the env does not keep them), SAME_STEP's final observations, the counts' template
+        final = (n if self.same_step else 0, obs_dim)
+        self._scratch = (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8), np.empty(n, dtype=bool),
+                         np.empty((0, 6, n)), np.empty((0, n), dtype=np.int8), np.empty(final, dtype=np.float32),
+                         np.full(n, K, dtype=np.int64), np.empty(n, dtype=np.int64))
+
+    def load_actions(self, actions) -> None:
+        self.actions = check_actions(actions, (self.n, self.n_act), "actions")  # the step clips, as PennyEnv does
+
+    def buffers(self, n=None):
+        """Fresh step outputs (functional.StepResults' arrays as a plain tuple) and impact buffers: the impact slots
+        are (n, K) arrays handed to the loop transposed ((K, n): scalar.ImpactBuffers' layout), so each env's slots
+        stay together; their counts start at K, so the step pads every slot (functional.step_env clears what a row
+        held). Returns (out, buf, times, ends)."""
+        n = self.n if n is None else n
+        K, d = self.K, self.obs_dim
+        arc, fault, done, post, rest, final, full, arc_total = self._scratch if n == self.n else \
+            (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8), np.empty(n, dtype=bool), np.empty((0, 6, n)),
+             np.empty((0, n), dtype=np.int8), np.empty((n if self.same_step else 0, d), dtype=np.float32),
+             np.full(n, K, dtype=np.int64), np.empty(n, dtype=np.int64))
+        out = (np.empty((n, d), dtype=np.float32), np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool),
+               np.empty(n), np.empty(n, dtype=np.int8), np.empty(n), np.empty(n),
+               np.empty(n, dtype=np.int64) if self.counts_arc else arc_total, final, done)  # (arc_total: not buf's arc)
+        times, ends = np.empty((n, K)), np.empty((n, K), dtype=np.int8)
+        buf = (full.copy(), times.T, ends.T, post, rest, arc, fault)  # (a copy: np.full costs 0.7 us, a copy 0.1)
+        return out, buf, times, ends
+
+    def step(self) -> StepOutputs:
+        out, buf, times, ends = self.buffers()
+        self.step_envs(tuple(self.st), self.actions, self.consts, out, buf)
+        return StepOutputs(StepResults(*out), buf[0], times, ends)
+
+    def reset(self, keys, episodes, rows, states=None, targets=None):
+        """Episodes drawn for ``rows`` (their keys and episode counters given for every env), reset options' states
+        and targets put in, every env's observation made; (obs, StepOutputs of the reset's info)."""
+        st = self.st
+        st.key[:], st.episode[:] = keys, episodes
+        st.pending[rows] = False
+        obs = np.empty((self.n, self.obs_dim), dtype=np.float32)
+        self.fns.reset_rows(rows, tuple(st), self.consts, obs)
+        if states is not None or targets is not None:
+            if states is not None:
+                st.S[:, rows] = states[rows].T
+            if targets is not None:
+                st.target[:, rows] = targets[rows].T
+            self.fns.observe_rows(rows, tuple(st), self.consts, obs)
+        others = np.flatnonzero(~np.isin(np.arange(self.n), rows))
+        if others.size:  # the envs outside a reset_mask keep their state; their observation as it is
+            self.fns.observe_rows(others, tuple(st), self.consts, obs)
+        return obs, reset_outputs(obs, st, self.p, self.K)
+
+    def warm_up(self) -> None:
+        """Every compiled function a step or a reset of this env can call, loaded (or compiled) now rather than inside
+        a step: the step with this env's own arrays (numba types an array's layout: the (K, 1) impact slots of one env
+        are C-contiguous, those of more envs Fortran-ordered, so a warm-up of another size would leave the first
+        step to compile), the resets and observations of one row and, where a reset of every row takes the
+        parallel loop, of every row. A compile interrupted by Ctrl-C corrupts numba's LLVM state; their first calls
+        hold it (threads.locked)."""
+        n = self.n
+        fns = (self.step_envs, self.fns.reset_rows, self.fns.observe_rows)
+        before = overloads(*fns)
+        with compiling(collect=lambda: overloads(*fns) != before):
+            st = tuple(new_state(n))
+            out, buf, _, _ = self.buffers()
+            self.step_envs(st, np.zeros((n, self.n_act)), self.consts, out, buf)
+            for rows in {1, n} if n >= threads.SERIAL_BELOW and not threads.serial_now() else {1}:
+                obs = np.empty((n, self.obs_dim), dtype=np.float32)
+                self.fns.reset_rows(np.arange(rows), st, self.consts, obs)
+                self.fns.observe_rows(np.arange(rows), st, self.consts, obs)
+
+    def mask(self):
+        return np.ones(self.n, dtype=bool)
+
+    def host(self, name):
+        return getattr(self.st, name)
+
+    def state_to_host(self) -> EnvState:
+        return self.st
+
+    def state_from_host(self, st) -> None:
+        self.st = EnvState(*st)
