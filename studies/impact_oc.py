@@ -52,8 +52,9 @@ solver failure of the impact-free search is not evidence: such pairs are counted
 solve failed"), never as paying. Both are local searches: "beats" shows a better plan with impacts; no gap does
 not prove that none exists, and a pair infeasible in both is reported as such ("neither"), never dropped.
 Certified (minimum time): the plan with impacts reaches the set in fewer rows than the lower bound of
-studies/oc_bounds.py allows every impact-free plan (a bound from the torque limits, the start's speeds and the
-distance), so it beats every impact-free plan, found or not. The open plane is not studied: it has no wall, so
+studies/oc_bounds.py allows every impact-free plan (drive only: the exact fewest rows of the open plane, a zonotope;
+both controls: a validated directional bound), so it beats every impact-free plan, found or not; the certified plans
+are replayed as episodes of the probe's environment (:func:`env_replay`). The open plane is not studied: it has no wall, so
 no impact can happen there and both variants are the same problem.
 """
 from __future__ import annotations
@@ -381,11 +382,46 @@ def pays(row, margin=MARGIN):
     return a < (1.0 - margin) * b
 
 
+_BOUNDS: dict = {}
+
+
 def lower_bound(row):
-    """(rows, reason) of training/oc_bounds.rows_lower_bound for the row's impact-free problem (minimum time)."""
+    """(rows, reason) of studies/oc_bounds.rows_lower_bound for the row's impact-free problem (minimum time), computed
+    once per problem (the both-controls bound runs a validated dynamic programme per row count)."""
     from studies.oc_bounds import rows_lower_bound
-    prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True, actuation=row["actuation"])
-    return rows_lower_bound(prob, row["actuation"])
+
+    key = (row["scene"], row["task"], row["actuation"], np.asarray(row["start"], float).tobytes(),
+           np.asarray(row["target"], float).tobytes())
+    if key not in _BOUNDS:
+        prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True,
+                       actuation=row["actuation"])
+        _BOUNDS[key] = rows_lower_bound(prob, row["actuation"])
+    return _BOUNDS[key]
+
+
+def env_replay(row):
+    """(is_success, steps, impacts): the plan with impacts replayed as an episode of the probe's environment reset
+    with the pair's start and target, success as in the optimal-control problem (park: position and rolling speed;
+    the probe's spin tolerance, which the problem does not pose, is switched off). The env's success is strict
+    (d < tolerance) where the problem allows 1e-6 of slack, so an episode can miss a plan that ends on the edge."""
+    import gymnasium as gym
+
+    kw = {"spin_tolerance": None} if TASK[row["actuation"]] == "park" else {}
+    env = gym.make(probe_id(row["scene"], row["actuation"]), **kw)
+    try:
+        env.reset(options={"state": np.asarray(row["start"], float), "target": np.asarray(row["target"], float)})
+        prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True, actuation=row["actuation"])
+        v = _scaled(prob, row["with"])
+        n_imp = 0
+        for i, a in enumerate(v, 1):
+            act = a if row["actuation"] == "both" else a[[0 if row["actuation"] == "steer" else 1]]
+            _, _, term, trunc, info = env.step(np.asarray(act, np.float64))
+            n_imp += int(info["impacts"])
+            if term or trunc:
+                return bool(info["is_success"]), i, n_imp
+        return False, len(v), n_imp
+    finally:
+        env.close()
 
 
 def certified(row) -> bool:
@@ -395,6 +431,14 @@ def certified(row) -> bool:
     if row["objective"] != "time" or not w.ok or w.impacts == 0 or infeasible_by_theorem(row["without"]):
         return False  # (steer only: no impact-free plan exists at all; that is feasibility, reported as such)
     return w.rows < lower_bound(row)[0]
+
+
+def impact_free_optimal(row) -> bool:
+    """Minimum time: the best impact-free plan found needs exactly the lower bound's rows, so it is a minimum-time
+    impact-free plan (certified optimal among impact-free plans)."""
+    wo = row["without"]
+    return (row["objective"] == "time" and row["actuation"] != "steer" and wo.ok
+            and wo.rows == lower_bound(row)[0])
 
 
 # -- the study ------------------------------------------------------------------------------------------
@@ -535,9 +579,10 @@ def readme_block(summary, margin=MARGIN) -> str:
     return (f"On the elastic ellipse and stadium ({n} pairs per actuation and objective), the best plan with impacts "
             f"hits the wall and beats the best impact-free plan found by more than {100 * margin:.0f} %: "
             + "; ".join(bits) + ". Failed impact-free solves are a column of their own, never counted as paying. "
-            "Certified: the plan with impacts reaches the target in fewer control steps than a lower bound "
-            "(studies/oc_bounds.py) allows any impact-free plan. The searches are local: a paying pair shows that a "
-            "better plan with impacts exists, not that none without does, and no plan is shown optimal.")
+            "Certified: the plan with impacts reaches the target in fewer control steps than a validated lower bound "
+            "(studies/oc_bounds.py: the exact fewest drive-only steps without impacts, a directional bound with both "
+            "controls) allows any impact-free plan. The searches are local: a paying pair shows that a better plan "
+            "with impacts exists, not that none without does, and no plan with impacts is shown optimal.")
 
 
 def update_readme(readme: Path, block: str) -> bool:
@@ -580,22 +625,30 @@ def answer(summary, margin=MARGIN) -> list[str]:
 
 def certificates(rows) -> list[str]:
     """Lines: the minimum-time pairs whose plan with impacts beats the certified lower bound of every impact-free plan
-    (both controls, drive only), or why none was found."""
-    found = []
+    (both controls, drive only), each replayed as an episode of the probe's environment; then the pairs whose best
+    impact-free plan attains the bound (certified optimal among impact-free plans)."""
+    found, optimal = [], []
     for r in rows:
-        if r["actuation"] == "steer" or r["objective"] != "time" or not r["with"].ok or r["with"].impacts == 0:
+        if r["actuation"] == "steer" or r["objective"] != "time":
             continue
         k, why = lower_bound(r)
-        if r["with"].rows < k:
-            found.append(f"  - {r['scene']} pair {r['pair']}, {LABEL[r['actuation']]}: with impacts "
-                         f"{r['with'].rows * r['with'].dt:.3g} s ({r['with'].impacts} impacts); every impact-free plan "
-                         f"needs at least {k * r['with'].dt:.3g} s ({why})")
-    if found:
-        return ["Pairs where the plan with impacts is certified better than every impact-free plan (minimum time):",
-                *found]
-    return ["No pair where the plan with impacts beats the certified lower bound of every impact-free plan: the bound "
-            "(distance and end speed at the rolling torque limit) is below the time of the plans with impacts found "
-            "on every pair."]
+        if impact_free_optimal(r):
+            optimal.append(f"{r['scene']} pair {r['pair']} ({LABEL[r['actuation']]}, {k * r['without'].dt:.3g} s)")
+        if not certified(r):
+            continue
+        ok, steps, n_imp = env_replay(r)
+        env = (f"replayed in {probe_id(r['scene'], r['actuation'])}: success at step {steps}, {n_imp} impacts" if ok
+               else f"replayed in {probe_id(r['scene'], r['actuation'])}: no success (ended at step {steps})")
+        found.append(f"  - {r['scene']} pair {r['pair']}, {LABEL[r['actuation']]}: with impacts "
+                     f"{r['with'].rows * r['with'].dt:.3g} s ({r['with'].rows} rows, {r['with'].impacts} impacts; "
+                     f"{env}); every impact-free plan needs at least {k * r['with'].dt:.3g} s ({k} rows: {why})")
+    out = (["Pairs where the plan with impacts is certified better than every impact-free plan (minimum time):", *found]
+           if found else ["No pair where the plan with impacts beats the certified lower bound of every impact-free "
+                          "plan."])
+    if optimal:
+        out += ["", "Impact-free plans found that attain the lower bound, hence minimum-time among impact-free plans "
+                f"(certified): {'; '.join(optimal)}."]
+    return out
 
 
 def plot_examples(rows, path, n=4):
@@ -690,11 +743,17 @@ def write_report(rows, out, argv, seconds, meta):
         "Both searches are local (multi-start SLSQP): a pair where impacts pay shows a plan with impacts that beats "
         "every plan found without; the shares are lower bounds of the shares in the problem distribution only in "
         "so far as the impact-free searches found the impact-free optima. Certified pairs do not depend on that: "
-        "their plan with impacts reaches the set in fewer rows than any impact-free plan can (studies/oc_bounds.py: "
-        "both controls, the rolling speed bounded by its start and the torque limit, and for a park brought below "
-        "v_tol by the end; drive only, the heading turning at its constant rate, the displacement along the target's "
-        "direction bounded by a linear program solved in closed form). No pair is certified optimal: the plans "
-        "with impacts are local optima, and no lower bound on plans with impacts is computed. Steer only: without "
+        "their plan with impacts reaches the set in fewer rows than any impact-free plan can (studies/oc_bounds.py; "
+        "an impact-free plan moves as on the open plane, so a bound for the plane holds on the table. Drive only: "
+        "the heading turns at its constant rate, so the end point is affine in the torques and the K-row end "
+        "points form a zonotope; the bound is the **exact** fewest rows of the plane, every smaller K certified "
+        "unreachable in interval arithmetic (studies/drive_zonotope.py). Both controls: the heading lies in its "
+        "reachable tube and the rolling speed obeys the torque limit; a dynamic programme over the rolling speed, "
+        "rounded outward with the cosines in interval arithmetic, bounds the displacement along a direction, and "
+        "a row count is excluded when some direction's bound falls short of the target (studies/both_bound.py). "
+        "Both bounds ignore the wall, so they are lower bounds on the table.) Where the best impact-free plan found "
+        "needs exactly the bound's rows it is a minimum-time impact-free plan. No plan with impacts is certified "
+        "optimal: they are local optima, and no lower bound on plans with impacts is computed. Steer only: without "
         "impacts the task is infeasible by theorem T2 (theta_dot is conserved), so every feasible plan there uses "
         "impacts (feasibility, not optimality).", "",
         *certificates(rows), "",
