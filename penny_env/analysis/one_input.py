@@ -1,4 +1,4 @@
-"""The formulas of theorems T7.1 and T7.2 (docs/controllability_theory.md, section T7): one input, approximately.
+"""The formulas of theorems T7.1, T7.2 and T7.4 (docs/controllability_theory.md, section T7): one input, approximately.
 
 * T7.1 (drive only, from rest, every convex table): rolling slowly into a crossing of the heading line that is not
   head-on gives the spin :func:`post_impact_spin` (nonzero), after which the penny backs off to where it started and
@@ -6,6 +6,9 @@
 * T7.2 (steer only, the circle, dissipative walls): a penny rolling along a diameter bounces head-on, each impact
   multiplying theta_dot by -e0 (:func:`head_on_coefficient`), so after :func:`bounces_to_slow` impacts it creeps
   slower than any tolerance, and T6.1 parks it.
+* T7.4 (steer only, the elastic circle): along a chord at :func:`stop_chord_distance` every impact is a full stop
+  (all rolling into spin) or a full release (all spin into rolling); braking over :func:`circle_free_angle` between
+  them lowers phi_dot^2 by 2 a1 times it per cycle (:func:`release_cycles`).
 """
 from __future__ import annotations
 
@@ -59,3 +62,34 @@ def post_impact_spin(theta_dot, cos_beta, sin_beta, sigma, law, params, grad_nor
     nu_w = grad_norm * params.R * sigma * sin_beta / s_j
     u = s_i * theta_dot
     return -(1.0 + e) * u * nu_u * nu_w / (nu_u * nu_u + nu_w * nu_w) / s_j
+
+
+# -- T7.4: steer only, the elastic circle: stop and release -------------------------------------------------------
+def stop_chord_distance(radius, beta) -> float:
+    """Distance from the centre of a disk of the given radius of the lines that meet its wall at incidence beta at
+    both crossings (a chord meets a circle at equal angles at both ends): radius sin(beta)."""
+    return radius * math.sin(beta)
+
+
+def stop_position_radius(radius, R, d) -> float:
+    """|z| of the contact point when the leading end of a penny rolling along the line at distance d reaches the
+    wall: z = C - R e with C = (sqrt(radius^2 - d^2), d) and e = (1, 0)."""
+    return math.hypot(math.sqrt(radius * radius - d * d) - R, d)
+
+
+def circle_free_angle(radius, R, d) -> float:
+    """The angle the heading of a penny spinning in place (theta_dot = 0) at the stop position of the line at
+    distance d can turn, starting with an end on the wall, before an end touches the wall again: pi - 2 chi, chi the
+    angle between the end's direction and the outward radial direction at the contact point,
+    cos chi = (sqrt(radius^2 - d^2) - R) / |z| (the end circle of radius R about z meets the wall at the two points at
+    +-chi; both ends stay inside while the end's angle lies in [chi, pi - chi])."""
+    r = stop_position_radius(radius, R, d)
+    chi = math.acos(max(-1.0, min(1.0, (math.sqrt(radius * radius - d * d) - R) / r)))
+    return math.pi - 2.0 * chi
+
+
+def release_cycles(phi_dot_stop, a1, free_angle) -> int:
+    """The stop-and-release cycles after which the spin left by a stop can be braked to 0 within the free angle: each
+    cycle (brake at a1 over the free angle, then the release) lowers phi_dot_stop^2 by 2 a1 free_angle (T7.4)."""
+    need = phi_dot_stop * phi_dot_stop - 2.0 * a1 * free_angle
+    return 0 if need < 0 else int(math.floor(need / (2.0 * a1 * free_angle))) + 1

@@ -258,3 +258,129 @@ def test_t7_2_bounces_to_slow():
     assert oi.ladder_rolling_speed(4.0, 0.5, 3) == -0.5
     with pytest.raises(ValueError):
         oi.bounces_to_slow(0.05, 0.01, 1.0)  # elastic: no ladder (the open case of T7.2)
+
+
+# -- T7.4: steer only, the elastic circle --------------------------------------------------------------------------
+def _aim_line(state, d, table, law, span=math.pi / 2, k=24):
+    """The rest-to-rest turn (after braking phi_dot) after which the heading line lies at distance d from the centre:
+    a zero of |z x e| - d over turns in [-span, span], by a scan and bisection on the simulator."""
+    n0 = int(math.ceil(abs(state[5]) / (A1 * DT)))
+    brake = [-state[5] / (A1 * DT * n0)] * n0 if n0 else []
+
+    def plan(delta):
+        return brake + _rest_to_rest(delta / (A1 * DT * DT * (k // 2) ** 2), k)
+
+    def f(delta):
+        s = simulate(state, table=table, law=law, controls=[[c * U1, 0.0] for c in plan(delta)],
+                     control_dt=DT).final_state
+        return abs(s[0] * math.sin(s[3]) - s[1] * math.cos(s[3])) - d
+    grid = np.linspace(-span, span, 41)
+    vals = [f(x) for x in grid]
+    for lo, hi, flo, fhi in zip(grid[:-1], grid[1:], vals[:-1], vals[1:]):
+        if flo * fhi <= 0:
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                fm = f(mid)
+                lo, hi, flo = (mid, hi, fm) if fm * flo > 0 else (lo, mid, flo)
+            return plan(lo)
+    raise AssertionError("no line at that distance within the turns searched")
+
+
+def _stop_release_episode(start, target, free_angle=None):
+    """T7.4's construction in the steer probe on the elastic circle. Returns (is_success in the last phase, the
+    largest relative error of the release speeds against sqrt(J / I_r) sqrt(phi_dot_s^2 - 2 a1 free_angle), the
+    number of release cycles seen)."""
+    import penny_env.analysis.impact_geometry as ig
+
+    fields, table = SCENES["circle"]
+    rho_c = 0.15
+    beta = ig.full_conversion_angle(P)
+    d_star = oi.stop_chord_distance(rho_c, beta)
+    Delta = oi.circle_free_angle(rho_c, P.R, d_star) if free_angle is None else free_angle
+    ratio = math.sqrt(P.rolling_inertia / P.J)
+    env = _env("Steer", fields, "elastic", 30000)
+    env.reset(options={"state": np.array(start, float), "target": np.array(target, float)})
+    u = env.unwrapped
+    info, impacts, errs, cycles = {}, 0, [], 0
+
+    def step(a):
+        nonlocal info, impacts
+        _, _, term, trunc, info = env.step(np.array([float(np.clip(a, -1, 1))]))
+        impacts += info["impacts"]
+        return term or trunc
+
+    def run(actions):
+        return any(step(a) for a in actions)
+
+    last = {}
+
+    def coast_to_impact():
+        n = impacts
+        while impacts == n:
+            last["heading"] = u.state[3]  # phi_dot = 0 on the chord: the heading at the stop
+            if step(0.0):
+                return True
+        return False
+    if run(_aim_line(u.state.copy(), d_star, table, "elastic")):
+        return False, errs, cycles
+    while True:
+        final = ratio ** 2 * u.state[4] ** 2 < 2 * A1 * Delta * 0.9
+        if final:  # aim slightly inside d*: the stop leaves |R theta_dot| = q |R theta_dot-|, reversed (T2.4)
+            q = 0.003 / abs(P.R * u.state[4])
+            nu2 = (1 + q) / 2  # 1 - 2 nu_u^2 = -q
+            b = math.atan(math.sqrt((1 - nu2) / nu2 * P.J / P.rolling_inertia))
+            if run(_aim_line(u.state.copy(), oi.stop_chord_distance(rho_c, b), table, "elastic", span=0.4)):
+                return False, errs, cycles
+        if coast_to_impact():
+            return False, errs, cycles
+        phi_s = u.state[5]  # the stop: all the rolling into spin
+        if final:
+            break
+        turned = abs(u.state[3] - last["heading"])  # turned, unbraked, over the rest of the stop's row
+        n = impacts
+        while impacts == n:  # brake at full torque until the release
+            if step(-math.copysign(1.0, u.state[5])):
+                return False, errs, cycles
+        cycles += 1
+        want = math.sqrt(max(phi_s ** 2 - 2 * A1 * (Delta - turned), 0.0)) / ratio
+        errs.append(abs(abs(u.state[4]) - want) / want)
+        if run(_aim_line(u.state.copy(), d_star, table, "elastic", span=0.4)):  # (the row's leftover spin)
+            return False, errs, cycles
+    while abs(u.state[5]) > 1e-12:  # brake the spin to 0 within the free angle (below the threshold now)
+        if step(-u.state[5] / (A1 * DT)):
+            return False, errs, cycles
+    turned = u.state[3] - last["heading"]  # back to 0.05 rad from the stop's heading: the line near the stop chord's
+    delta = -(turned - math.copysign(0.05, turned))
+    if run(_rest_to_rest(delta / (A1 * DT * DT * 12 ** 2), 24)):
+        return False, errs, cycles
+    while np.hypot(*u.state[:2]) > 0.07:  # creep inward
+        if step(0.0):
+            return False, errs, cycles
+    if run(_aim(u.state.copy(), np.asarray(target, float), table, "elastic", toward=True)):  # T6.1
+        return bool(info["is_success"]), errs, cycles
+    while not step(0.0):
+        pass
+    return bool(info["is_success"]), errs, cycles
+
+
+def test_t7_4_steer_only_elastic_circle_stops_and_releases():
+    """T7.4: on the elastic circle a steer-only penny aimed along a stop chord (distance R_c sin beta* from the
+    centre) stops at each end (all rolling into spin), brakes over the free angle, is released (all spin back into
+    rolling, exactly, at the mirror point), each cycle lowering phi_dot^2 by 2 a1 (pi - 2 chi); after the cycles a
+    slightly perturbed stop leaves a slow creep, and T6.1 parks it: is_success in the steer probe's environment."""
+    start = np.array([0.03, -0.05, 0.0, 0.7, 4.0, 0.5])
+    target = np.array([-0.04, 0.05])
+    ok, errs, cycles = _stop_release_episode(start, target)
+    assert cycles >= 1 and max(errs) < 1e-6, errs
+    assert ok
+
+
+def test_t7_4_fails_with_the_flat_wall_free_angle():
+    """The mutation: the flat wall's free angle pi - 2 beta* instead of the circle's pi - 2 chi mispredicts the
+    release speeds."""
+    import penny_env.analysis.impact_geometry as ig
+
+    start = np.array([0.03, -0.05, 0.0, 0.7, 4.0, 0.5])
+    _, errs, _ = _stop_release_episode(start, np.array([-0.04, 0.05]),
+                                       free_angle=math.pi - 2 * ig.full_conversion_angle(P))
+    assert errs and max(errs) > 1e-3
