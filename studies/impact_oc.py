@@ -827,7 +827,29 @@ def write_report(rows, out, argv, seconds, meta):
               "- Laws other than elastic (the probes' plastic and e = 0.5 walls) and the circle and rounded "
               "rectangle tables are not run here."]
     out.write_text("\n".join(lines) + "\n")
+    write_certificates(rows, out.with_name(out.stem + "_certificates.json"))
     return summary
+
+
+def write_certificates(rows, path):
+    """The certified minimum-time pairs as data (start, target, the plan with impacts as scaled torques, its rows and
+    impacts, the impact-free bound and its reason, the env replay), so a test can replay each plan in the probe's
+    environment and recompute its bound."""
+    import json
+
+    out = []
+    for r in rows:
+        if r["actuation"] == "steer" or not certified(r):
+            continue
+        prob = Problem(r["scene"], r["task"], r["start"], r["target"], impacts=True, actuation=r["actuation"])
+        k, why = lower_bound(r)
+        ok, steps, n_imp = env_replay(r)
+        out.append({"scene": r["scene"], "pair": r["pair"], "actuation": r["actuation"], "task": r["task"],
+                    "start": [float(x) for x in r["start"]], "target": [float(x) for x in r["target"]],
+                    "plan": _scaled(prob, r["with"]).tolist(), "rows": int(r["with"].rows),
+                    "impacts": int(r["with"].impacts), "bound_rows": int(k), "bound": why,
+                    "env_success": ok, "env_steps": int(steps), "env_impacts": int(n_imp)})
+    path.write_text(json.dumps(out, indent=1) + "\n")
 
 
 def main(argv=None):

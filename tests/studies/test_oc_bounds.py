@@ -221,3 +221,39 @@ def test_both_bound_validated_pieces():
         up = both_bound.displacement_upper(prob.start[4], prob.start[3], prob.start[5], psi, prob.params.R, a1, a2,
                                            prob.dt, 12, math.inf)
         assert moved <= up
+
+
+# -- the certified pairs of the report (docs/optimal_control_certificates.json) -------------------------------
+def _certificates():
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "docs" / "optimal_control_certificates.json"
+    return json.loads(path.read_text())
+
+
+@pytest.mark.parametrize("actuation", ["both", "drive"])
+def test_a_certified_pair_replays_in_the_env_and_beats_the_bound(actuation):
+    """Issue 39 item 8: the report's certified pair with the fewest rows: its plan with impacts (found by the package's
+    optimizer) is replayed as an episode of the probe's environment and succeeds at its row count with impacts, and
+    the validated bound recomputed here allows no impact-free plan that many rows."""
+    import gymnasium as gym
+
+    cands = [c for c in _certificates() if c["actuation"] == actuation]
+    assert cands, f"no certified {actuation} pair in the report"
+    c = min(cands, key=lambda x: x["bound_rows"])
+    env = gym.make(io.probe_id(c["scene"], actuation), **({"spin_tolerance": None} if c["task"] == "park" else {}))
+    env.reset(options={"state": np.array(c["start"]), "target": np.array(c["target"])})
+    impacts, steps, info = 0, 0, {}
+    for a in np.array(c["plan"]):
+        act = a if actuation == "both" else a[[1]]
+        _, _, term, trunc, info = env.step(np.asarray(act, np.float64))
+        impacts, steps = impacts + info["impacts"], steps + 1
+        if term or trunc:
+            break
+    env.close()
+    assert info["is_success"] and steps == c["rows"] == c["env_steps"] and impacts >= 1
+    prob = Problem(c["scene"], c["task"], np.array(c["start"]), np.array(c["target"]), impacts=True,
+                   actuation=actuation)
+    K, _ = oc_bounds.rows_lower_bound(prob, actuation, max_rows=c["rows"] + 1)
+    assert K > c["rows"] and K == min(c["bound_rows"], c["rows"] + 2) or K > c["rows"]
