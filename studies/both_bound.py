@@ -109,7 +109,7 @@ def displacement_upper(w0, phi0, w, psi, R, a1, a2, dt, K, wf, h_steps=CELLS_PER
     lo, hi = e_lo[:-1], e_hi[1:]              # cell enclosures
     coef_up = _up(_up(R * dt) / m)
     coef_lo = _down(_down(R * dt) / m)
-    wf_up = math.inf if math.isinf(wf) else float(_up(wf))
+    wf_up = math.inf if math.isinf(wf) else float(_up(wf * (1 + 1e-12)))  # (the set's float R * theta_dot test)
     V = np.where((hi >= -wf_up) & (lo <= wf_up), 0.0, -np.inf)
     taus = [s / m for s in range(m + 1)]
 
@@ -149,7 +149,7 @@ def required_lower(start, target, psi, tol):
     from mpmath import iv
 
     d = iv.cos(iv.mpf(psi)) * (iv.mpf(target[0]) - iv.mpf(start[0])) + iv.sin(iv.mpf(psi)) * (
-        iv.mpf(target[1]) - iv.mpf(start[1])) - iv.mpf(tol)
+        iv.mpf(target[1]) - iv.mpf(start[1])) - iv.mpf(tol) * (1 + 1e-12)  # (the set's float hypot test)
     return _iv_float(d, False)
 
 

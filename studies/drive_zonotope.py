@@ -159,7 +159,7 @@ def _certify(iv, mpf, z0, phi0, omega, w0, R, a, dt, K, target, tol, angle, rel_
     for gx, gy in gen:
         val -= abs(dx * gx + dy * gy)
     q = val / iv.sqrt(dx * dx + dy * dy)  # the distance is at least this for any nonzero d
-    return bool(mpf(q.a) > mpf(tol))
+    return bool(mpf(q.a) > mpf(tol) * (1 + 1e-12))  # (1e-12: the terminal set's float hypot, a few ulp off)
 
 
 def fewest_rows(z0, phi0, omega, w0, R, a, dt, target, tol, max_rows=400):
