@@ -155,7 +155,7 @@ def periodic(tname, cfg, params, rho, seed):
                 row["turns"] = steps / p * a / (2 * math.pi)
                 row["island"] = island(smap, z, p, steps, rng)
             if kind == "parabolic" and tname == "stadium":
-                row["flat"] = on_flat_sides(smap, z, p)
+                row["pieces"] = wall_pieces(smap, z, p)
             rows.append(row)
     return rows
 
@@ -165,21 +165,25 @@ def rotation_per_period(ev) -> float:
     return float(max(abs(math.atan2(e.imag, e.real)) for e in ev))
 
 
-def on_flat_sides(smap, z, p) -> bool:
-    """True if every impact of the period-p orbit through z lies on a flat side of the stadium (curvature 0): such an
-    orbit translated along the side is again periodic, a neutral family (like the specular stadium's bouncing-ball
-    orbits)."""
+def wall_pieces(smap, z, p) -> str:
+    """Where the impacts of the stadium's period-p orbit through z lie: "flat" (every one on the flat sides: the orbit
+    translated along a side is again periodic, a neutral family like the specular stadium's bouncing-ball orbits),
+    "cap" (every one on one cap, a circle arc: the orbit rotated about the cap's centre is again periodic, a neutral
+    family as on the circle, whose orbits are all neutral), or "mixed"."""
     pts, cur = [z], np.asarray(z, float)[None, :]
     for _ in range(p - 1):
         cur = smap.step(cur, 1)[0]
         pts.append(cur[0])
     tab = smap.table
+    where = set()
     for q in pts:
         px, py = smap.chart.point(np.array([q[0]]))
         x, y = float(np.ravel(px)[0]), float(np.ravel(py)[0])
-        if not (abs(x) <= tab.length / 2 + 1e-9 and abs(abs(y) - tab.radius) < 1e-9):
-            return False
-    return True
+        where.add("flat" if abs(x) <= tab.length / 2 and abs(abs(y) - tab.radius) < 1e-9 else
+                  ("cap+" if x > 0 else "cap-"))
+    if where == {"flat"}:
+        return "flat"
+    return "cap" if len(where) == 1 else "mixed"
 
 
 def island(smap, z, p, steps, rng, n=6, start=1e-3):
@@ -292,7 +296,8 @@ def summarise(res, cfg) -> dict:
                          "island_turns": [r["turns"] for r in rows if r["type"] == "elliptic" and r["island"] is not None
                                           and r["island"] < ISLAND],
                          "rotations": [r["rotation"] for r in rows if r["type"] == "elliptic"],
-                         "parabolic_flat": sum(bool(r.get("flat")) for r in rows if r["type"] == "parabolic")}
+                         "parabolic_pieces": {k: sum(r.get("pieces") == k for r in rows if r["type"] == "parabolic")
+                                              for k in ("cap", "flat", "mixed")}}
                      for t, rows in res["periodic"].items()}
     s["slices"] = res["slice_summary"]
     s["fate"] = {}
@@ -345,6 +350,12 @@ def answer_block(s, base="docs/") -> str:
                 "decided by the impacts followed, and a configuration with both ends on the wall is outside the "
                 "paper's single-impact theory")
 
+    def pieces(p):
+        c = p.get("parabolic_pieces", {})
+        return (f"{c.get('cap', 0)} with every impact on one cap, a family by rotation about its centre as on the "
+                f"circle; {c.get('flat', 0)} on the flat sides, a family by translation along them like the "
+                f"bouncing-ball orbits; {c.get('mixed', 0)} on both")
+
     def conv(v):
         return (f"{v['converged']}/{v['chaotic']} within {100 * CONVERGED:.0f} % (2 batch-means SE and the change "
                 f"n/2 -> n, median {100 * v['drift_median']:.0f} %)")
@@ -361,8 +372,7 @@ def answer_block(s, base="docs/") -> str:
         "has none (**theorem**: integrable) | circle: **not ergodic (theorem**: \\|beta\\| is an invariant function "
         f"that is not constant). Ellipse: **computed** evidence against: {isl(pe)}; regular-looking orbits hold most of "
         f"the measure. Stadium: **computed**: {isl(ps)}, {ps['types']['parabolic']} parabolic (all eigenvalues 1: "
-        f"neutral, not islands; {ps.get('parabolic_flat', 0)} of them with every impact on a flat side, a family by "
-        "translation along it like the bouncing-ball orbits, the others touching a cap near a junction); Kac's check "
+        f"neutral families, not islands: {pieces(ps)}); Kac's check "
         f"(each orbit's mean flight against the invariant mean) fails for {ell['kac_off']}/{ell['orbits']} ellipse and "
         f"{sta['kac_off']}/{sta['orbits']} stadium orbits (more than 4 standard errors off): not ergodic, or mixing "
         "slower than these runs. A proof either way is **open** |",
@@ -566,7 +576,7 @@ def write_report(res, s, out, argv, cfg, seconds):
             prow.append([tname, r["period"], ", ".join(f"{v:.4f}" for v in r["z"]), r["type"], ev,
                          "-" if r["island"] is None else f"{r['island']:.3g}",
                          f"{r['rotation']:.4f} / {r['island_steps']} / {r['turns']:.1f}" if "turns" in r else
-                         ("flat sides" if r.get("flat") else "-")])
+                         r.get("pieces", "-")])
     lines += ["## 5. Periodic orbits and their stability (computed)", "",
               f"Newton's method on F^p(z) = z (periods {', '.join(map(str, cfg['periods']))}) from {cfg['seeds']} seeds "
               "drawn from the invariant measure (and the axes' head-on bounces), in z = (s, beta, psi), one row per "
@@ -578,12 +588,12 @@ def write_report(res, s, out, argv, cfg, seconds):
               f"argument a of the eigenvalue pair per period; at most {ISLAND_CAP} impacts): an island where it stays "
               f"below {ISLAND:g}, over the turns the last column states (most rotate 0.006 to 0.03 rad per period, so "
               "2000 impacts would be about one turn; KAM-type stability is not proved here). Parabolic (every eigenvalue 1): "
-              "neutral, not islands; where every impact of a stadium orbit lies on a flat side (the last column), the "
-              "orbit translated along the side is again periodic, a neutral family like the specular stadium's "
-              "bouncing-ball orbits; the others touch a cap near a junction. A search from "
+              "neutral families, not islands; the last column says which wall pieces a stadium orbit hits: one cap "
+              "(the orbit rotated about the cap's centre is again periodic, as every orbit of the circle), the flat "
+              "sides (translated along them, like the specular stadium's bouncing-ball orbits), or both. A search from "
               "finitely many seeds finds some orbits, not all.", "",
               *table(["table", "period", "z = (s, beta, psi)", "type", "eigenvalues of DF^p", "island: max distance",
-                      "rotation a [rad/period] / impacts followed / turns"],
+                      "rotation a [rad/period] / impacts followed / turns, or the wall pieces hit"],
                      prow or [["-", "-", "-", "none found", "-", "-", "-"]]), ""]
     srow = [[k.split("|")[0], k.split("|")[1], v["points"], f"{v['median']:.3f}", f"{v['null_level']:.3f}",
              f"{v['regular_share']:.2f}"] for k, v in s["slices"].items()]

@@ -184,8 +184,8 @@ def test_a_wedged_penny_loses_little_energy_per_impact():
 
 def test_island_checks_cover_stated_turns_and_flat_side_families():
     """Item 5: the elliptic orbit's rotation per period is the argument of its eigenvalue pair; the island check of
-    the report runs at least ISLAND_TURNS turns (within the cap). on_flat_sides: the head-on bounce between the
-    stadium's flat sides lies on them; an orbit touching a cap does not."""
+    the report runs at least ISLAND_TURNS turns (within the cap). wall_pieces: the head-on bounce between the
+    stadium's flat sides lies on them; a parabolic orbit of the report lies on one cap (a circle arc)."""
     smap = po.SectionMap(ba.TABLES["ellipse"], P, RHO)
     z, J, _, _ = po.find_periodic(smap, 2, np.array([[0.0104, 0.1733, 2.7365]]))[0]
     _, ev = po.classify(J)
@@ -196,9 +196,9 @@ def test_island_checks_cover_stated_turns_and_flat_side_families():
     stad = po.SectionMap(ba.TABLES["stadium"], P, RHO)
     top = float(stad.chart.s(np.array([0.0]), np.array([0.1]))[0])
     flat = po.find_periodic(stad, 2, np.array([[top, 0.0, np.pi]]))
-    assert flat and ba.on_flat_sides(stad, flat[0][0], 2)
+    assert flat and ba.wall_pieces(stad, flat[0][0], 2) == "flat"
     cap = po.find_periodic(stad, 2, np.array([[0.3641, 0.9157, 1.8747]]))
-    assert cap and not ba.on_flat_sides(stad, cap[0][0], 2)
+    assert cap and ba.wall_pieces(stad, cap[0][0], 2) == "cap" and po.classify(cap[0][1])[0] == "parabolic"
 
 
 @pytest.mark.parametrize("law, e", [("elastic", 1.0), (0.5, 0.5), (0.9, 0.9)])
