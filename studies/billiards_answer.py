@@ -558,9 +558,10 @@ def write_report(res, s, out, argv, cfg, seconds):
               "larger of two estimates: between the orbits' exponents, and from batch means of the per-collision "
               "log-stretch pooled over every orbit (10 batches per orbit). At small rho the free flights are "
               "heavy-tailed (the stretch of a collision grows with the flight before it), so both estimates converge "
-              "slowly and the error bar is itself uncertain: an independent code differed from an earlier run of this "
-              "one by about 3 of its (8-orbit) standard errors at rho = 0.03 and 0.003. The difference column is "
-              "therefore not a test at the scale of the SE; what is checked is the agreement within the formula's "
+              "slowly and the error bar is itself uncertain: an independent code (the referee's of issue 39) "
+              "differed from an earlier run of this one by about 3 of its (8-orbit) standard errors at rho = 0.03 "
+              "and 0.003. The difference column is therefore not a test at "
+              "the scale of the SE; what is checked is the agreement within the formula's "
               "error term O(rho ln^2 rho).", "",
               *table(["rho", "computed lambda (mean +- SE)", "SE between orbits / from pooled batches",
                       "Dahlqvist -2 ln rho + C", "difference", "difference / SE", "rho ln^2 rho"],
@@ -702,8 +703,10 @@ DISSIPATIVE_TEXT = [
     "bouncing at the last impact followed, or wedged: the penny lies as a chord of the wall with both ends on it, and "
     "its ends hit alternately with flights below 1e-12 s (at least 10 in a row at the end). This is a real Zeno "
     "accumulation of the **sequential single-impact model** (the paper's law applied to one end at a time), not an "
-    "artefact: an independent replay reproduced such an orbit's impact sequence to 4 digits for 25 impacts, front and "
-    "back alternating, the gaps shrinking by about e each time. But each impact removes only a small share of the "
+    "artefact: an independent replay (the referee's of issue 39) reproduced such an orbit's impact sequence to 4 "
+    "digits for 25 impacts, front and back alternating, the gaps shrinking by about e each time; here "
+    "tests/studies/test_billiards_answer.py checks a wedged orbit's flights, both ends on the wall and its speed "
+    "falling at every impact. But each impact removes only a small share of the "
     "energy (the column 'wedged: energy lost per impact' gives the median over each wedged orbit's last 10 impacts), "
     "so 'the penny comes to rest' would extrapolate over infinitely many impacts and is not claimed; its 'energy kept' "
     "is that after the impacts followed. A configuration with both ends on the wall is outside the paper's single-"
