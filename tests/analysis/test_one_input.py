@@ -96,8 +96,15 @@ def _drive_rest_episode(scene, law, start, target, spin_formula=oi.post_impact_s
     clearance = -float(table.h(*u.state[:2])) / float(np.linalg.norm(table.grad(*u.state[:2])))
     if u.state[4] != 0.0 or clearance < P.R + margin * 0.5:  # (h / |grad h| under-estimates the distance: convex)
         return False, impacts, spin_error
-    # phase 3: the crawl (T3.3), delta within the torque limit and the clearance margin (T3.3: a turn strays at most
-    # 4 pi R delta / |w| from its start)
+    # phase 3: the crawl (T3.3)
+    _crawl(step, u, target, w, margin)
+    return bool(info.get("is_success", False)), impacts, spin_error
+
+
+def _crawl(step, u, target, w, margin):
+    """T3.3's crawl in an env (step(action) -> episode ended), a turn of the heading at a time, delta within the torque
+    limit and the clearance margin (a turn strays at most 4 pi R delta / |w| from its start). True if the episode
+    ended."""
     while True:
         z, phi0 = u.state[:2].copy(), u.state[3]
         d = target - z
@@ -112,10 +119,9 @@ def _drive_rest_episode(scene, law, start, target, spin_formula=oi.post_impact_s
             want_next = delta * (math.cos(p1 - alpha) - math.cos(phi0 - alpha))
             a = (want_next - u.state[4]) / (A2 * DT) if i == n - 1 else dv / (A2 * DT)
             if step(a):
-                return bool(info["is_success"]), impacts, spin_error
+                return True
         if dist <= step_max:
-            break
-    return bool(info.get("is_success", False)), impacts, spin_error
+            return False
 
 
 def _rest_starts(scene, n, rng):
@@ -384,3 +390,47 @@ def test_t7_4_fails_with_the_flat_wall_free_angle():
     _, errs, _ = _stop_release_episode(start, np.array([-0.04, 0.05]),
                                        free_angle=math.pi - 2 * ig.full_conversion_angle(P))
     assert errs and max(errs) > 1e-3
+
+
+# -- T7.3 ----------------------------------------------------------------------------------------------------------
+def braking_distance(theta_dot, a2):
+    """T7.3's braking path: the contact point travels at most R theta_dot^2 / (2 a2) while the rolling is braked."""
+    return P.R * theta_dot * theta_dot / (2 * a2)
+
+
+def _spinning_episode(start, target, brake_formula=braking_distance):
+    """T7.3 in the drive probe on the ellipse: brake the rolling at full torque (no impact, the contact point within the
+    braking distance of its start), then crawl. (is_success, moved / predicted braking path, impacts)."""
+    fields, _ = SCENES["ellipse"]
+    env = _env("Drive", fields, "elastic", 20000)
+    env.reset(options={"state": np.array(start, float), "target": np.array(target, float)})
+    u = env.unwrapped
+    info, impacts = {}, 0
+
+    def step(a):
+        nonlocal info, impacts
+        _, _, term, trunc, info = env.step(np.array([float(np.clip(a, -1, 1))]))
+        impacts += info["impacts"]
+        return term or trunc
+    while abs(u.state[4]) > 0:
+        if step(-u.state[4] / (A2 * DT)):
+            return False, math.nan, impacts
+    moved = float(np.hypot(*(u.state[:2] - start[:2])))
+    ratio = moved / brake_formula(abs(start[4]), A2)
+    _crawl(step, u, np.asarray(target, float), u.state[5], 0.02)
+    return bool(info.get("is_success", False)), ratio, impacts
+
+
+def test_t7_3_a_spinning_penny_with_room_brakes_then_crawls():
+    """T7.3: phi_dot0 != 0 and clearance above R + R theta_dot0^2 / (2 a2): braking never reaches the wall (the path is
+    at most the braking distance), then the crawl reaches the target: is_success with no impact."""
+    start = np.array([0.02, -0.03, 0.0, 0.4, 6.0, 0.35])
+    ok, ratio, impacts = _spinning_episode(start, np.array([-0.04, 0.06]))
+    assert ok and impacts == 0 and ratio <= 1.0 + 1e-9, (ok, ratio, impacts)
+
+
+def test_t7_3_fails_with_half_the_braking_distance():
+    """The mutation: half the braking distance is exceeded by the real braking path."""
+    start = np.array([0.02, -0.03, 0.0, 0.4, 6.0, 0.35])
+    _, ratio, _ = _spinning_episode(start, np.array([-0.04, 0.06]), brake_formula=lambda w, a: braking_distance(w, a) / 2)
+    assert ratio > 1.0
