@@ -52,8 +52,9 @@ solver failure of the impact-free search is not evidence: such pairs are counted
 solve failed"), never as paying. Both are local searches: "beats" shows a better plan with impacts; no gap does
 not prove that none exists, and a pair infeasible in both is reported as such ("neither"), never dropped.
 Certified (minimum time): the plan with impacts reaches the set in fewer rows than the lower bound of
-studies/oc_bounds.py allows every impact-free plan (a bound from the torque limits, the start's speeds and the
-distance), so it beats every impact-free plan, found or not. The open plane is not studied: it has no wall, so
+studies/oc_bounds.py allows every impact-free plan (drive only: the exact fewest rows of the open plane, a zonotope;
+both controls: a validated directional bound), so it beats every impact-free plan, found or not; the certified plans
+are replayed as episodes of the probe's environment (:func:`env_replay`). The open plane is not studied: it has no wall, so
 no impact can happen there and both variants are the same problem.
 """
 from __future__ import annotations
@@ -381,11 +382,79 @@ def pays(row, margin=MARGIN):
     return a < (1.0 - margin) * b
 
 
+_BOUNDS: dict = {}
+
+
 def lower_bound(row):
-    """(rows, reason) of training/oc_bounds.rows_lower_bound for the row's impact-free problem (minimum time)."""
+    """(rows, reason) of studies/oc_bounds.rows_lower_bound for the row's impact-free problem (minimum time), computed
+    once per problem (the both-controls bound runs a validated dynamic programme per row count)."""
     from studies.oc_bounds import rows_lower_bound
+
+    key = (row["scene"], row["task"], row["actuation"], np.asarray(row["start"], float).tobytes(),
+           np.asarray(row["target"], float).tobytes())
+    if key not in _BOUNDS:
+        prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True,
+                       actuation=row["actuation"])
+        _BOUNDS[key] = rows_lower_bound(prob, row["actuation"])
+    return _BOUNDS[key]
+
+
+def env_replay(row, v=None):
+    """(is_success, steps, impacts): the plan with impacts (scaled torques v, default the row's) replayed as an episode
+    of the probe's environment reset with the pair's start and target, success as in the optimal-control problem
+    (park: position and rolling speed; the probe's spin tolerance, which the problem does not pose, is switched off).
+    The env's success is strict (d < tolerance) where the problem allows 1e-6 of slack, so an episode misses a
+    minimum-time plan that ends on the edge of the set: :func:`env_certified_plan` moves it inside."""
+    import gymnasium as gym
+
+    kw = {"spin_tolerance": None} if TASK[row["actuation"]] == "park" else {}
+    env = gym.make(probe_id(row["scene"], row["actuation"]), **kw)
+    try:
+        env.reset(options={"state": np.asarray(row["start"], float), "target": np.asarray(row["target"], float)})
+        prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True, actuation=row["actuation"])
+        v = _scaled(prob, row["with"]) if v is None else np.asarray(v, float)
+        n_imp = 0
+        for i, a in enumerate(v, 1):
+            act = a if row["actuation"] == "both" else a[[0 if row["actuation"] == "steer" else 1]]
+            _, _, term, trunc, info = env.step(np.asarray(act, np.float64))
+            n_imp += int(info["impacts"])
+            if term or trunc:
+                return bool(info["is_success"]), i, n_imp
+        return False, len(v), n_imp
+    finally:
+        env.close()
+
+
+INSIDE = 1e-3  # the re-solve's margin inside the terminal set (relative), for the env's strict success test
+_ENV_PLANS: dict = {}
+
+
+def env_certified_plan(row):
+    """(scaled torques, is_success, steps, impacts, how): the certified row's plan with impacts as an episode of the
+    probe's environment. A minimum-time plan ends on the edge of the set, which the env's strict test can miss; then
+    the package's optimizer (solve_rows, SLSQP) re-solves the same rows from it into the set shrunk by INSIDE, and that
+    plan, verified again by simulation, hitting the wall, is replayed. Computed once per row."""
+    from studies.optimal_control import solve_rows
+
+    key = (row["scene"], row["actuation"], np.asarray(row["start"], float).tobytes(),
+           np.asarray(row["target"], float).tobytes(), np.asarray(row["with"].controls, float).tobytes())
+    if key in _ENV_PLANS:
+        return _ENV_PLANS[key]
     prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True, actuation=row["actuation"])
-    return rows_lower_bound(prob, row["actuation"])
+    v = _scaled(prob, row["with"])
+    ok, steps, n_imp = env_replay(row, v)
+    how = "the plan as found"
+    if not ok:
+        prob.tolerance *= 1.0 - INSIDE
+        prob.speed_tolerance *= 1.0 - INSIDE
+        K = len(v)
+        sol = solve_rows(prob, K, x0=v, maxiter=100, max_rows=max(K, 40))
+        how = f"re-solved {100 * INSIDE:g} % inside the set: {sol.status.split(':')[0]}"
+        if sol.ok and sol.impacts > 0:
+            v = _scaled(prob, sol)
+            ok, steps, n_imp = env_replay(row, v)
+    _ENV_PLANS[key] = (v, ok, steps, n_imp, how)
+    return _ENV_PLANS[key]
 
 
 def certified(row) -> bool:
@@ -395,6 +464,14 @@ def certified(row) -> bool:
     if row["objective"] != "time" or not w.ok or w.impacts == 0 or infeasible_by_theorem(row["without"]):
         return False  # (steer only: no impact-free plan exists at all; that is feasibility, reported as such)
     return w.rows < lower_bound(row)[0]
+
+
+def impact_free_optimal(row) -> bool:
+    """Minimum time: the best impact-free plan found needs exactly the lower bound's rows, so it is a minimum-time
+    impact-free plan (certified optimal among impact-free plans)."""
+    wo = row["without"]
+    return (row["objective"] == "time" and row["actuation"] != "steer" and wo.ok
+            and wo.rows == lower_bound(row)[0])
 
 
 # -- the study ------------------------------------------------------------------------------------------
@@ -479,6 +556,7 @@ def summarise(rows, margin=MARGIN):
                     "only_with_failed": sum(r["with"].ok and r["with"].impacts > 0 and solve_failed(r["without"])
                                             for r in sel),
                     "certified": sum(certified(r) for r in sel),
+                    "certified_env": sum(certified(r) and env_certified_plan(r)[1] for r in sel),
                     "feasible_without": sum(r["without"].ok for r in sel),
                     "feasible_with": sum(r["with"].ok for r in sel),
                     "neither": sum(not r["with"].ok and not r["without"].ok for r in sel),
@@ -527,7 +605,8 @@ def readme_block(summary, margin=MARGIN) -> str:
             bits.append(f"steer-only park: no impact-free plan exists (theorem T2), a plan with impacts was found in "
                         f"{s['feasible_with']}/{s['pairs']} pairs (feasibility, not optimality)")
             continue
-        cert = f", certified in {s['certified']}" if s["objective"] == "time" else ""
+        cert = (f", certified in {s['certified']} ({s.get('certified_env', 0)} replayed as successful env episodes)"
+                if s["objective"] == "time" else "")
         bits.append(f"{LABEL[s['actuation']]}, minimum {s['objective']}: impacts pay in {s['pays']}/{s['pairs']} "
                     f"(exact 95 % interval {lo:.2f} to {hi:.2f}){cert}, the impact-free solve failed in "
                     f"{s['without_failed']}")
@@ -535,9 +614,10 @@ def readme_block(summary, margin=MARGIN) -> str:
     return (f"On the elastic ellipse and stadium ({n} pairs per actuation and objective), the best plan with impacts "
             f"hits the wall and beats the best impact-free plan found by more than {100 * margin:.0f} %: "
             + "; ".join(bits) + ". Failed impact-free solves are a column of their own, never counted as paying. "
-            "Certified: the plan with impacts reaches the target in fewer control steps than a lower bound "
-            "(studies/oc_bounds.py) allows any impact-free plan. The searches are local: a paying pair shows that a "
-            "better plan with impacts exists, not that none without does, and no plan is shown optimal.")
+            "Certified: the plan with impacts reaches the target in fewer control steps than a validated lower bound "
+            "(studies/oc_bounds.py: the exact fewest drive-only steps without impacts, a directional bound with both "
+            "controls) allows any impact-free plan. The searches are local: a paying pair shows that a better plan "
+            "with impacts exists, not that none without does, and no plan with impacts is shown optimal.")
 
 
 def update_readme(readme: Path, block: str) -> bool:
@@ -564,7 +644,8 @@ def answer(summary, margin=MARGIN) -> list[str]:
                 f"episodes in {s['witnessed']}), none in {s['neither']}; the plans found are not shown optimal.")
             continue
         cert = (f"; **certified** in {s['certified']} of {s['pairs']} (the plan with impacts needs fewer rows than the "
-                "lower bound of every impact-free plan)" if s["objective"] == "time" else
+                f"lower bound of every impact-free plan; {s.get('certified_env', 0)} of them replayed as successful "
+                "episodes of the probe's environment)" if s["objective"] == "time" else
                 "; no certificate (no lower bound on the effort of impact-free plans is computed)")
         lines.append(
             f"- {LABEL[s['actuation']].capitalize()}, minimum {s['objective']}: impacts pay in {s['pays']} of "
@@ -580,22 +661,31 @@ def answer(summary, margin=MARGIN) -> list[str]:
 
 def certificates(rows) -> list[str]:
     """Lines: the minimum-time pairs whose plan with impacts beats the certified lower bound of every impact-free plan
-    (both controls, drive only), or why none was found."""
-    found = []
+    (both controls, drive only), each replayed as an episode of the probe's environment; then the pairs whose best
+    impact-free plan attains the bound (certified optimal among impact-free plans)."""
+    found, optimal = [], []
     for r in rows:
-        if r["actuation"] == "steer" or r["objective"] != "time" or not r["with"].ok or r["with"].impacts == 0:
+        if r["actuation"] == "steer" or r["objective"] != "time":
             continue
         k, why = lower_bound(r)
-        if r["with"].rows < k:
-            found.append(f"  - {r['scene']} pair {r['pair']}, {LABEL[r['actuation']]}: with impacts "
-                         f"{r['with'].rows * r['with'].dt:.3g} s ({r['with'].impacts} impacts); every impact-free plan "
-                         f"needs at least {k * r['with'].dt:.3g} s ({why})")
-    if found:
-        return ["Pairs where the plan with impacts is certified better than every impact-free plan (minimum time):",
-                *found]
-    return ["No pair where the plan with impacts beats the certified lower bound of every impact-free plan: the bound "
-            "(distance and end speed at the rolling torque limit) is below the time of the plans with impacts found "
-            "on every pair."]
+        if impact_free_optimal(r):
+            optimal.append(f"{r['scene']} pair {r['pair']} ({LABEL[r['actuation']]}, {k * r['without'].dt:.3g} s)")
+        if not certified(r):
+            continue
+        _, ok, steps, n_imp, how = env_certified_plan(r)
+        env = (f"replayed in {probe_id(r['scene'], r['actuation'])} ({how}): success at step {steps}, {n_imp} impacts"
+               if ok else f"replayed in {probe_id(r['scene'], r['actuation'])} ({how}): no success (ended at step "
+               f"{steps})")
+        found.append(f"  - {r['scene']} pair {r['pair']}, {LABEL[r['actuation']]}: with impacts "
+                     f"{r['with'].rows * r['with'].dt:.3g} s ({r['with'].rows} rows, {r['with'].impacts} impacts; "
+                     f"{env}); every impact-free plan needs at least {k * r['with'].dt:.3g} s ({k} rows: {why})")
+    out = (["Pairs where the plan with impacts is certified better than every impact-free plan (minimum time):", *found]
+           if found else ["No pair where the plan with impacts beats the certified lower bound of every impact-free "
+                          "plan."])
+    if optimal:
+        out += ["", "Impact-free plans found that attain the lower bound, hence minimum-time among impact-free plans "
+                f"(certified): {'; '.join(optimal)}."]
+    return out
 
 
 def plot_examples(rows, path, n=4):
@@ -690,11 +780,17 @@ def write_report(rows, out, argv, seconds, meta):
         "Both searches are local (multi-start SLSQP): a pair where impacts pay shows a plan with impacts that beats "
         "every plan found without; the shares are lower bounds of the shares in the problem distribution only in "
         "so far as the impact-free searches found the impact-free optima. Certified pairs do not depend on that: "
-        "their plan with impacts reaches the set in fewer rows than any impact-free plan can (studies/oc_bounds.py: "
-        "both controls, the rolling speed bounded by its start and the torque limit, and for a park brought below "
-        "v_tol by the end; drive only, the heading turning at its constant rate, the displacement along the target's "
-        "direction bounded by a linear program solved in closed form). No pair is certified optimal: the plans "
-        "with impacts are local optima, and no lower bound on plans with impacts is computed. Steer only: without "
+        "their plan with impacts reaches the set in fewer rows than any impact-free plan can (studies/oc_bounds.py; "
+        "an impact-free plan moves as on the open plane, so a bound for the plane holds on the table. Drive only: "
+        "the heading turns at its constant rate, so the end point is affine in the torques and the K-row end "
+        "points form a zonotope; the bound is the **exact** fewest rows of the plane, every smaller K certified "
+        "unreachable in interval arithmetic (studies/drive_zonotope.py). Both controls: the heading lies in its "
+        "reachable tube and the rolling speed obeys the torque limit; a dynamic programme over the rolling speed, "
+        "rounded outward with the cosines in interval arithmetic, bounds the displacement along a direction, and "
+        "a row count is excluded when some direction's bound falls short of the target (studies/both_bound.py). "
+        "Both bounds ignore the wall, so they are lower bounds on the table.) Where the best impact-free plan found "
+        "needs exactly the bound's rows it is a minimum-time impact-free plan. No plan with impacts is certified "
+        "optimal: they are local optima, and no lower bound on plans with impacts is computed. Steer only: without "
         "impacts the task is infeasible by theorem T2 (theta_dot is conserved), so every feasible plan there uses "
         "impacts (feasibility, not optimality).", "",
         *certificates(rows), "",
@@ -768,7 +864,28 @@ def write_report(rows, out, argv, seconds, meta):
               "- Laws other than elastic (the probes' plastic and e = 0.5 walls) and the circle and rounded "
               "rectangle tables are not run here."]
     out.write_text("\n".join(lines) + "\n")
+    write_certificates(rows, out.with_name(out.stem + "_certificates.json"))
     return summary
+
+
+def write_certificates(rows, path):
+    """The certified minimum-time pairs as data (start, target, the plan with impacts as scaled torques, its rows and
+    impacts, the impact-free bound and its reason, the env replay), so a test can replay each plan in the probe's
+    environment and recompute its bound."""
+    import json
+
+    out = []
+    for r in rows:
+        if r["actuation"] == "steer" or not certified(r):
+            continue
+        k, why = lower_bound(r)
+        v, ok, steps, n_imp, how = env_certified_plan(r)
+        out.append({"scene": r["scene"], "pair": r["pair"], "actuation": r["actuation"], "task": r["task"],
+                    "start": [float(x) for x in r["start"]], "target": [float(x) for x in r["target"]],
+                    "plan": np.asarray(v).tolist(), "plan_from": how, "rows": int(r["with"].rows),
+                    "impacts": int(r["with"].impacts), "bound_rows": int(k), "bound": why,
+                    "env_success": ok, "env_steps": int(steps), "env_impacts": int(n_imp)})
+    path.write_text(json.dumps(out, indent=1) + "\n")
 
 
 def main(argv=None):

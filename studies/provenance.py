@@ -73,7 +73,8 @@ REPORTS = {
                       ("studies/study.py", "studies/study_report.py", "configs/study/large.yaml") + _ENV + _PHYSICS
                       + _TABLES),
     "docs/optimal_control.md": ("python -m studies.impact_oc --pairs 12 --workers 1",
-                                ("studies/impact_oc.py", "studies/oc_bounds.py", "studies/optimal_control.py",
+                                ("studies/impact_oc.py", "studies/oc_bounds.py", "studies/drive_zonotope.py",
+                                 "studies/both_bound.py", "studies/optimal_control.py",
                                  "studies/shooting.py",
                                  "studies/witness.py", "training/policies.py", "penny_env/physics/sensitivity.py",
                                  "penny_env/envs/vector_env.py", "penny_env/envs/penny_env.py") + _ENV + _PHYSICS

@@ -39,6 +39,7 @@ Field overrides are applied like ``gymnasium.make`` keywords (values read as YAM
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from dataclasses import dataclass, field
 
@@ -228,10 +229,16 @@ class Witness:
         self.family = FAMILIES[self.probe]
         self.cands = self.family.candidates()
         self.max_steps = self.env.spec.max_episode_steps
+        # the time limit once: an override max_episode_steps= is the real episode's (gym.make took it above), and
+        # passing it beside **overrides gave make_vec the keyword twice (issue 39 item 2)
+        vec_kwargs = {**self.overrides, "max_episode_steps": self.max_steps}
         self.vec = gym.make_vec(env_id, num_envs=len(self.cands), vectorization_mode="vector_entry_point",
-                                max_episode_steps=self.max_steps, **self.overrides)
+                                **vec_kwargs)
         self.plane = self.core.plane
-        self.scene, self.task = self.core.scene, self.core.task
+        # the theorems read the time limit from the task: under gymnasium's TimeLimit the env's own task keeps the
+        # preset's max_episode_steps, so the episode's limit (an override's) is put into the task they read
+        self.scene = self.core.scene
+        self.task = dataclasses.replace(self.core.task, max_episode_steps=self.max_steps)
 
     def close(self):
         self.env.close()

@@ -8,7 +8,8 @@
 * :mod:`penny_env.analysis.impact_geometry` - the impact laws in scaled speeds (the formulas of
   docs/controllability_theory.md);
 * :mod:`penny_env.analysis.controllability_theorems` - which cells and start/target pairs a theorem of
-  docs/controllability_theory.md makes impossible.
+  docs/controllability_theory.md makes impossible;
+* :mod:`penny_env.analysis.one_input` - the formulas of the one-input theorems T7.1 and T7.2.
 
 The reports built on them (and the mpmath reference, the other integrators, the studies) live in the
 repository's ``studies/`` folder, not in the package: ``python -m studies.<name> --help``.

@@ -312,3 +312,29 @@ def test_witness_study_report_only_needs_its_csvs(tmp_path, capsys):
     with pytest.raises(SystemExit):
         ws.main(["--report-only", "--out-dir", str(tmp_path)])
     assert "witnesses.csv" in capsys.readouterr().err
+
+
+def test_witness_accepts_a_time_limit_override():
+    """Issue 39 item 2: max_episode_steps is a gymnasium.make keyword and T2.5 depends on the time limit, so a cell
+    with a shorter limit must be witnessable. It reached gym.make_vec twice (TypeError: multiple values). The vector
+    search and the real episode must both run under the override's limit."""
+    w = wt.Witness("PennyProbeSteer-Stadium-Elastic-v0", {"max_episode_steps": 40})
+    try:
+        assert w.max_steps == 40 == w.env.spec.max_episode_steps
+        r = w.pair(0)
+    finally:
+        w.close()
+    # T2.5 reads the episode's limit (2 s), not the preset's 20 s: under 20 s it excludes no pair of this cell
+    # (docs/controllability_theory.md), under 2 s it excludes this one, and the search never contradicts it
+    assert not r.witnessed and r.theorem == "T2.5" and r.reason.startswith("impossible (theorem T2.5)")
+    w20 = wt.Witness("PennyProbeSteer-Stadium-Elastic-v0")
+    try:
+        assert w20.theorem(*_pair_of(w20, 0)) is None
+    finally:
+        w20.close()
+
+
+def _pair_of(w, seed):
+    """The start state and target of the pair of this seed in the witness's real env."""
+    w.env.reset(seed=seed)
+    return w.env.unwrapped.state.copy(), w.env.unwrapped.target.copy()
