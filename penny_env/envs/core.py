@@ -103,6 +103,12 @@ class Core:
                           "compile); using the plain-Python step (backend='python'), much slower", stacklevel=4)
         return chosen
 
+    def named_failure(self, exc, where: str):
+        """A ValueError naming the scene's law or table when ``exc`` was raised inside the user's function (the
+        plain-Python step calls them as written; physics/faults.blame), else None (re-raise ``exc`` as it is)."""
+        from ..physics.faults import blame
+        return blame(exc, self.law, self.table, where)
+
     def entry_points(self, target=None, **options):
         """The env step's entry points (backends/env.py) for ``target`` ("python", "cpu", "cuda"; None: this
         core's backend) and this scene's table kind and task."""

@@ -8,7 +8,7 @@ import numpy as np
 
 from .scalar import NO_ARC, flow_penny, impact_buffers, impacts_of, overflowed, relocate_inside, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
-from .faults import check_mapped, fault_error
+from .faults import blame, check_mapped, fault_error
 from .laws import apply_law, make_law, restitution_update
 from .params import PennyParams, SolverSettings
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
@@ -218,8 +218,15 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         # the interval, resumed wherever the per-call event cap stopped it (scalar.run_interval, the
         # event loop's one driver), stopping after the n_impacts-th impact
         left = 0 if n_impacts is None else n_impacts - len(times)
-        drive = lambda b: run_interval(state, math.cos(state[3]), math.sin(state[3]), acc1, acc2, dt, model,  # noqa: E731
-                                       table is None, True, left, b, 0, NO_ARC)
+        def drive(b):
+            try:
+                return run_interval(state, math.cos(state[3]), math.sin(state[3]), acc1, acc2, dt, model,
+                                    table is None, True, left, b, 0, NO_ARC)
+            except Exception as exc:  # a user's law or table raising in plain Python: named (faults.blame)
+                named = blame(exc, law, table, f"t = {t0:.6g} s")
+                if named is None:
+                    raise
+                raise named from exc
         s1, elapsed = drive(buf)
         if len(times) + buf.count[0] > settings.max_impacts:
             asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
@@ -318,6 +325,12 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     if abs(g) > 1e-8 * table.size:
         label = "front" if end == 1 else "back"
         raise ValueError(f"state: the {label} end is not on the wall (h = {g:.3g})")
-    post = apply_law(S, float(end), params, table, law)
+    try:
+        post = apply_law(S, float(end), params, table, law)
+    except Exception as exc:  # a user's law raising: named (faults.blame)
+        named = blame(exc, law, table, "state")
+        if named is None:
+            raise
+        raise named from exc
     check_mapped(S, post, float(end), params, table, law, "state")  # (the guard of the event loop, for the map)
     return post[:, 0]
