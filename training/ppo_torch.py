@@ -569,12 +569,18 @@ def parse_args(argv=None, ap=None) -> Args:
 def parse_sets(items) -> dict:
     """{field: value} from FIELD=VALUE strings, values read as YAML ("0.5" a float, "{kind: circle}" a dict)."""
     import yaml
+
+    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
     out = {}
     for item in items:
-        if "=" not in item:
+        if "=" not in item or not item.split("=", 1)[0].strip():
             raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
         key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
+        try:
+            out[key.strip()] = yaml_load(value)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"--set {item!r}: the value {value!r} is not valid YAML ({' '.join(str(exc).split())}); "
+                             "quote it in the shell, e.g. --set 'table={kind: circle, radius: 0.2}'") from None
     return out
 
 
