@@ -25,6 +25,7 @@ from .physics import apply_law, end_kinematics
 from .physics import flow as _flow
 from .physics.faults import blame, check_mapped
 from .physics.simulation import FREE_INTERVAL, MAX_INTERVALS, interval_grid
+from .physics.tables.registered import audited, check_impacts, sample
 from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
                                  positive_time, real_array)
 
@@ -275,4 +276,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
         res = (env[order], np.concatenate(times)[order], np.concatenate(ends)[order], np.concatenate(posts)[order])
     else:
         res = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 6)))
+    if audited(tab):  # a user's registered shape: its formulas against its own h where the pennies hit
+        pick = sample(len(res[0]))
+        check_impacts(tab, res[3][pick], res[2][pick], params.R,
+                      row_names=[f"penny {i}, t = {t:.6g} s" for i, t in zip(res[0][pick], res[1][pick])])
     return BatchResult(S.T.copy(), np.bincount(res[0], minlength=n), *res)

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..physics import SolverSettings
 from ..physics.faults import warn_episode_fault
+from ..physics.tables.registered import ImpactAudit, audited
 from ..physics.validation import as_state, check_inside, real_array
 from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT
 from ..step.actions import check_actions  # noqa: F401 (the envs check actions with it)
@@ -86,6 +87,8 @@ class Core:
         self.obs_dim = self.task_record.obs_dim
         self.max_steps = task.max_episode_steps
         self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
+        # a user's registered shape: a sample of the impacts compared with its own h (tables/registered.py)
+        self.audit = ImpactAudit(self.table, self.R) if audited(self.table) else None
         self.ax, self.ay = scene.spawn_axes()
 
     def _backend(self, backend):

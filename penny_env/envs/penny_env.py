@@ -291,6 +291,9 @@ class PennyEnv(gym.Env):
             if named is None:
                 raise
             raise named from exc
+        if out[6] and c.audit is not None:  # a user's registered shape: its formulas at a sample of the impacts
+            n = out[6]
+            c.audit.check(self._buf.post[:n, :, 0], self._buf.end[:n, 0], f"PennyEnv.step at t = {self._t:.6g} s")
         s, self._trig, self._count, d, self._steps, t, n_imp, reward, terminated, truncated, energy, limit = out
         t_prev = self._t
         self._s = s

@@ -11,6 +11,7 @@ from .flows import flow, end_kinematics, kinetic_energy
 from .faults import blame, check_mapped, fault_error
 from .laws import apply_law, make_law, restitution_update
 from .params import PennyParams, SolverSettings
+from .tables.registered import audited, check_impacts, sample
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
                          check_table, is_real, positive_count, positive_time)
 
@@ -281,6 +282,10 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             seg_t.append(t0)
             seg_s.append(state)
             seg_acc.append((0.0, 0.0))  # set at the top of the loop
+    if audited(table):  # a user's registered shape: its formulas against its own h where the penny hit
+        pick = sample(len(states))
+        check_impacts(table, np.array(states).reshape(-1, 6)[pick], np.array(ends)[pick], params.R,
+                      row_names=[f"simulate, t = {times[j]:.6g} s" for j in pick])
     S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
     traj = Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
