@@ -12,12 +12,15 @@ hyperparameter (--set algo_kwargs.learning_rate=1e-3).
 
 The run folder (--out; default runs/<config name>; --quick without --out: a new temporary
 directory) has training.runner's layout, which training.evaluate reads: config.json, model.zip,
-best_model.zip (best evaluation success), checkpoints/, curve.csv, progress.csv, TensorBoard
+best_model.zip (the better of the best evaluation during training and the final model on eval_episodes fresh
+episodes; best.json and results.md report both, training.best_choice), checkpoints/, curve.csv, progress.csv, TensorBoard
 events (``tensorboard --logdir runs``), plus results.json and results.md: the trained policy
 against zero and random actions on fresh seeds. The folder is printed at the start and the end.
 On a terminal SB3's progress bar shows; elsewhere (nohup, a scheduler, CI) a line every
 --progress-seconds gives steps, steps/s, the last evaluation's success and the time left.
---resume goes on from a checkpoint (a run folder: its newest; SAC: with its replay buffer), appends to
+--out must be empty or new unless --resume, and one run writes a folder at a time (a lock: training.run_folder).
+--resume goes on from a checkpoint (a run folder: its newest intact one; SAC: with its replay buffer), with the
+same num_envs, env_id, algo, seed and hyperparameters (only total_timesteps may change), appends to
 progress.csv and reports the whole run's training time in results.md. Ctrl-C during training saves a
 checkpoint and prints one line with the exact command that resumes the run. SAC checkpoints keep only the
 newest replay buffer (each holds up to buffer_size transitions) unless --keep-replay-buffers.
@@ -165,9 +168,19 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
     """Train into the run folder `out` (training.runner's layout), then compare the trained policy
     with zero and random actions; returns the results (also results.json, results.md). Ctrl-C during
     training raises training.runner.TrainingInterrupted after saving a checkpoint."""
-    from training.runner import train_agent
+    from training.run_folder import check_new_folder, run_lock
 
     out = Path(out)
+    with run_lock(out):  # (one run writes a folder at a time: training.run_folder)
+        if resume is None:
+            check_new_folder(out)
+        return _train(cfg, out, quick, resume, progress, progress_seconds, keep_replay_buffers)
+
+
+def _train(cfg, out: Path, quick, resume, progress, progress_seconds, keep_replay_buffers):
+    from training.best_choice import describe
+    from training.runner import train_agent
+
     print(f"output folder: {out}", flush=True)
     total = 2_048 if quick else cfg["total_timesteps"]
     n_eval = 8 if quick else cfg["eval_episodes"]
@@ -184,7 +197,7 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
                         checkpoint_freq=total // 2 if quick else cfg["checkpoint_freq"],
                         save_replay_buffer=cfg["algo"] == "sac", keep_replay_buffers=keep_replay_buffers,
                         resume=resume, progress=progress_mode() if progress is None else progress,
-                        progress_seconds=progress_seconds)
+                        progress_seconds=progress_seconds, confirm_episodes=n_eval)
     this_process = time.perf_counter() - t0
     timing = json.loads((out / "train_time.json").read_text())
     seconds = timing["train_seconds"]  # the whole run, resumed parts included (None: the earlier part's time unknown)
@@ -200,6 +213,8 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
                            n_eval, eval_seed),
         "zero": evaluate(cfg["env_id"], lambda o: np.zeros((len(o),) + act_space.shape, np.float32), n_eval, eval_seed),
     }
+    best = json.loads((out / "best.json").read_text()) if (out / "best.json").is_file() else {}
+    results["best"] = best
     (out / "results.json").write_text(json.dumps(results, indent=2))
     rows = [f"| {name} | {r['mean_return']:.3f} | {r['success_rate']:.3f} | {r['mean_length']:.1f} |"
             for name, r in ((k, results[k]) for k in ("trained", "random", "zero"))]
@@ -215,6 +230,8 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
           f"{total} timesteps on {cfg['num_envs']} vectorized envs {took} (seed {cfg['seed']}); "
           f"evaluation on {n_eval} episodes with seeds from {eval_seed}.", "",
           "| policy | mean return | success rate | mean length |", "|---|---|---|---|", *rows, ""]
+    if describe(best):
+        md += [describe(best) + ".", ""]
     (out / "results.md").write_text("\n".join(md))
     print("\n".join(md))
     print(f"output folder: {out} (python -m training.evaluate {out}; tensorboard --logdir {out})", flush=True)
@@ -252,10 +269,13 @@ def main(argv=None):
         out = Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / Path(args.config).stem
     else:
         out = (Path("runs") / Path(args.config).stem).resolve()
+    from training.run_folder import RunFolderError
     from training.runner import TrainingInterrupted, latest_checkpoint
     try:
         return train(cfg, out, quick=args.quick, resume=args.resume, progress_seconds=args.progress_seconds,
                      keep_replay_buffers=args.keep_replay_buffers)
+    except RunFolderError as exc:  # another run's folder, a resume that changes the run: usage errors
+        ap.error(str(exc))
     except KeyboardInterrupt as exc:  # Ctrl-C: one line, no traceback
         if isinstance(exc, TrainingInterrupted):
             where = f"interrupted at {exc.timesteps:,} steps, checkpoint saved: {exc.checkpoint}"

@@ -44,6 +44,12 @@ def test_train_quick_then_evaluate_its_output(reports_untouched, capsys, monkeyp
     best = evaluate.main([str(run), "--episodes", "4", "--no-video", "--best"])
     assert best["model"].endswith("best_model.zip")
     assert (run / "evaluation_best.json").is_file()
+    # the final model beside it, on the same episodes, and how best_model.zip was chosen (issue 40, item 15)
+    assert best["final"]["episodes"] == 4 and best["final"]["model"].endswith("model.zip")
+    printed = capsys.readouterr().out
+    assert "the final model (model.zip) on the same episodes: success" in printed
+    assert "best_model.zip is the " in printed and "on the same 8 episodes" in printed
+    assert "best_model.zip is the " in (run / "results.md").read_text()
     # without MoviePy (the main job's install): the default evaluation still prints its numbers, then one
     # line on how to get the videos (it crashed after the episodes)
     capsys.readouterr()
@@ -101,8 +107,15 @@ def test_best_model_follows_evaluation_success(tmp_path):
         rows = [(float(r["success_rate"]), float(r["mean_return"]), int(float(r["timesteps"]))) for r in csv.DictReader(f)]
     best = json.loads((run / "best.json").read_text())
     top = max(rows, key=lambda r: r[:2])
-    assert (best["success_rate"], best["mean_return"]) == top[:2]
-    assert best["timesteps"] == min(r[2] for r in rows if r[:2] == top[:2])
+    candidate = best["confirmed"]["checkpoint"]["during_training"]  # the best evaluation during training...
+    assert (candidate["success_rate"], candidate["mean_return"]) == top[:2]
+    assert candidate["timesteps"] == min(r[2] for r in rows if r[:2] == top[:2])
+    # ...confirmed against the final model on 100 fresh episodes (issue 40, item 15): best_model.zip is the better
+    confirmed = best["confirmed"]
+    assert confirmed["episodes"] == 100 and confirmed["final"]["timesteps"] == 128
+    ck, fi = confirmed["checkpoint"], confirmed["final"]
+    assert best["chosen"] == ("checkpoint" if (ck["success_rate"], ck["mean_return"]) > (fi["success_rate"],
+                                                                                          fi["mean_return"]) else "final")
 
 
 def test_sac_keeps_only_the_newest_replay_buffer(reports_untouched):
