@@ -149,3 +149,27 @@ def test_the_best_model_is_chosen_on_the_same_fresh_episodes(tmp_path, monkeypat
     out = best_choice.confirm_best("PennyReach-Ellipse-v0", _Model("final"), best, record,
                                    lambda p: _Model(Path(p).read_text()), (100_000, 0.9, 2.0), 200, 7, 32)
     assert out["chosen"] == "checkpoint" and best.read_text() == "candidate" and out["timesteps"] == 20_000
+
+
+@needs_filelock
+def test_ppo_torch_refuses_another_runs_folder_too(tmp_path, capsys):
+    # the same defect in the other training command: a non-empty --out, or a folder another run holds
+    pytest.importorskip("torch", reason="torch (the penny-env[train] extra) is not installed")
+    from filelock import FileLock
+
+    from training import ppo_torch
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "progress.csv").write_text("global_step\n128\n")
+    with pytest.raises(SystemExit) as exit_:
+        ppo_torch.main(["--quick", "--out", str(out), "--device", "cpu"])
+    assert exit_.value.code == 2 and "is not empty (progress.csv)" in capsys.readouterr().err
+    held = tmp_path / "held"
+    held.mkdir()
+    other = FileLock(str(held / ".lock"))
+    other.acquire()
+    try:
+        with pytest.raises(RunFolderError, match="another training run is writing into"):
+            ppo_torch.train(ppo_torch.Args(out=str(held), quick=True, device="cpu"))
+    finally:
+        other.release()
