@@ -248,7 +248,8 @@ def main(argv=None):
                     help="override a config field (value read as YAML); a dotted key sets one hyperparameter: "
                          "--set algo_kwargs.learning_rate=1e-3")
     ap.add_argument("--resume", default=None, metavar="PATH",
-                    help="go on from a checkpoint: a model_<steps>_steps.zip or a run folder (its newest checkpoint)")
+                    help="go on from a checkpoint: a model_<steps>_steps.zip or a run folder (its newest intact "
+                         "checkpoint), with the same settings (only total_timesteps may change)")
     ap.add_argument("--progress-seconds", type=float, default=30.0,
                     help="off a terminal: seconds between progress lines (default 30)")
     ap.add_argument("--keep-replay-buffers", action="store_true",
