@@ -14,6 +14,7 @@ field and the row (``states[3] has a non-finite phi``).
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,8 +23,9 @@ from .physics import SolverSettings, make_law, make_table  # noqa: F401 (make_ta
 from .backends.pennies import advance_pennies, first_impacts
 from .physics import apply_law, end_kinematics
 from .physics import flow as _flow
-from .physics.faults import check_mapped
+from .physics.faults import blame, check_mapped
 from .physics.simulation import FREE_INTERVAL, MAX_INTERVALS, interval_grid
+from .physics.tables.registered import audited, check_impacts, sample
 from .physics.validation import (as_states, check_inside, check_params, check_settings, check_speed_bound, check_table,
                                  positive_time, real_array)
 
@@ -96,7 +98,8 @@ def first_impact(states, controls, horizon, *, params=None, table, settings=None
         from .backends.pennies import FIRST_IMPACT_ROUNDS
         return CompiledBatch(params, tab, ImpactLaw("elastic", 1.0), settings, target=_cuda_target()).first_impacts(
             S, acc1, acc2, h, FIRST_IMPACT_ROUNDS)
-    return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=backend)
+    with _named(None, tab, "first_impact"):
+        return first_impacts(S, acc1, acc2, h, params, tab, settings, backend=backend)
 
 
 def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray:
@@ -125,7 +128,8 @@ def impact_map(states, ends, *, params=None, table, law="elastic") -> np.ndarray
     if off.any():
         k = int(np.flatnonzero(off)[0])
         raise ValueError(f"states[{k}]: the {'front' if e[k] > 0 else 'back'} end is not on the wall (h = {g[k]:.3g})")
-    post = apply_law(S, e, params, tab, law)
+    with _named(law, tab, "impact_map"):
+        post = apply_law(S, e, params, tab, law)
     check_mapped(S, post, e, params, tab, law)  # (the event loop's guard, for the map: physics/faults.py)
     return post.T.copy()
 
@@ -146,6 +150,18 @@ class BatchResult:
     def times_of(self, i: int) -> np.ndarray:
         """Impact times of penny i."""
         return self.impact_times[self.impact_env == i]
+
+
+@contextmanager
+def _named(law, table, where):
+    """An exception raised inside a user's law or table (plain Python) as a ValueError naming it (faults.blame)."""
+    try:
+        yield
+    except Exception as exc:
+        named = blame(exc, law, table, where)
+        if named is None:
+            raise
+        raise named from exc
 
 
 def _backend(backend):
@@ -241,7 +257,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
         acc1, acc2 = accel(k)
         check_speed_bound(S, acc1, acc2, dt, params, "controls" if controls is not None else "states",
                           k if controls is not None else None)
-        S, log = step(S, acc1, acc2, dt)
+        with _named(law, tab, f"interval {k} (t = {t0:.6g} s)"):
+            S, log = step(S, acc1, acc2, dt)
         if log is not None:
             envs.append(log[0])
             times.append(t0 + log[1])
@@ -259,4 +276,8 @@ def simulate(states, *, params=None, table, law="elastic", t_final, controls=Non
         res = (env[order], np.concatenate(times)[order], np.concatenate(ends)[order], np.concatenate(posts)[order])
     else:
         res = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 6)))
+    if audited(tab):  # a user's registered shape: its formulas against its own h where the pennies hit
+        pick = sample(len(res[0]))
+        check_impacts(tab, res[3][pick], res[2][pick], params.R,
+                      row_names=[f"penny {i}, t = {t:.6g} s" for i, t in zip(res[0][pick], res[1][pick])])
     return BatchResult(S.T.copy(), np.bincount(res[0], minlength=n), *res)

@@ -46,12 +46,12 @@ def probe_cells() -> list[str]:
 def load_config(path) -> dict:
     """Read and check a study config: ValueError naming an unknown key, cell, agent or
     hyperparameter, or a bad value, before any job starts."""
+    from penny_env.envs.yaml_io import read_text
     from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"study config not found: {path}")
+    text = read_text(path, "study config")  # (a folder, a missing file, bytes that are not UTF-8: named)
     try:
-        cfg = yaml_load(path.read_text())
+        cfg = yaml_load(text)
     except yaml.YAMLError as exc:
         raise ValueError(f"{path}: invalid YAML: {exc}") from None
     if not isinstance(cfg, dict):

@@ -5,8 +5,9 @@
 
 RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip): the output
 folder of training.train and every (cell, agent, seed) folder of studies.study for PPO/SAC.
---best evaluates best_model.zip (the best evaluation during training) instead of the final model,
-into RUN_DIR/evaluation_best.json. Episodes are deterministic-policy
+--best evaluates best_model.zip (the better of the best evaluation during training and the final model, on the
+same fresh episodes when training ended: training.best_choice) and, on the same episodes, the final model beside
+it, both with their intervals, into RUN_DIR/evaluation_best.json. Episodes are deterministic-policy
 episodes on fresh seeds (default: the run's evaluation seeds). The interval is Wilson's score
 interval for a binomial proportion. Videos (gymnasium RecordVideo, needs MoviePy: the `video` extra)
 go to RUN_DIR/videos/; without MoviePy the evaluation runs and prints its numbers, and one line says
@@ -19,25 +20,14 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 
+from training.best_choice import wilson_interval  # noqa: F401 (its home was here)
 
 VIDEO_HINT = ('no video: recording needs MoviePy, the "video" extra (pip install -e ".[video]" in the clone); '
               '--no-video skips it')
-
-
-def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion k / n."""
-    if n <= 0:
-        raise ValueError(f"n must be positive, got {n}")
-    p = k / n
-    den = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / den
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def record_video(env_id: str, model, folder: Path, episodes: int, seed: int) -> list[str]:
@@ -104,8 +94,27 @@ def evaluate_run(run_dir, episodes: int = 100, seed: int | None = None, video_ep
         first = next((j for j, ok in enumerate(r["success"]) if ok), 0) if gif_success else 0
         write_gif(cfg["env_id"], model, Path(gif), seed + first)
         res["gif"], res["gif_seed"], res["gif_success"] = str(gif), seed + first, bool(r["success"][first])
+    if best:  # the final model on the same episodes, beside it: one score alone does not say which is better
+        res["final"] = _final_beside(run_dir, cfg, episodes, seed)
     (run_dir / ("evaluation_best.json" if best else "evaluation.json")).write_text(json.dumps(res, indent=2))
     return res
+
+
+def _final_beside(run_dir: Path, cfg: dict, episodes: int, seed: int) -> dict:
+    """model.zip's scores on the episodes --best played, and best.json's record of how best_model.zip was chosen."""
+    from training.best_choice import describe, scores
+    from training.episodes import run_episodes
+    from training.runner import load_run
+    _, final = load_run(run_dir, "model.zip")
+    out = scores(run_episodes(cfg["env_id"], lambda o: final.predict(o, deterministic=True)[0], episodes, seed))
+    out["model"] = str(run_dir / "model.zip")
+    record = run_dir / "best.json"
+    if record.is_file():
+        try:
+            out["choice"] = describe(json.loads(record.read_text()))
+        except (ValueError, KeyError, TypeError):
+            out["choice"] = ""
+    return out
 
 
 def main(argv=None):
@@ -117,7 +126,8 @@ def main(argv=None):
     ap.add_argument("--no-video", action="store_true")
     ap.add_argument("--gif", default=None, help="also write an episode as an animated GIF here (the first one)")
     ap.add_argument("--gif-success", action="store_true", help="the GIF shows the first episode that succeeded")
-    ap.add_argument("--best", action="store_true", help="evaluate best_model.zip (best evaluation during training)")
+    ap.add_argument("--best", action="store_true",
+                    help="evaluate best_model.zip, and the final model beside it on the same episodes")
     args = ap.parse_args(argv)
     try:
         res = evaluate_run(args.run_dir, args.episodes, args.seed, 0 if args.no_video else args.video_episodes,
@@ -125,9 +135,16 @@ def main(argv=None):
     except ValueError as exc:
         ap.error(str(exc))
     lo, hi = res["ci95_wilson"]
-    print(f"{res['algo'].upper()} on {res['env_id']}: success {res['success_rate']:.3f} "
+    which = "best_model.zip" if args.best else "model.zip"
+    print(f"{res['algo'].upper()} on {res['env_id']} ({which}): success {res['success_rate']:.3f} "
           f"(95 % Wilson interval [{lo:.3f}, {hi:.3f}]) over {res['episodes']} episodes from seed {res['seed']}; "
           f"mean return {res['mean_return']:.2f}")
+    if "final" in res:
+        f = res["final"]
+        print(f"the final model (model.zip) on the same episodes: success {f['success_rate']:.3f} (95 % Wilson interval "
+              f"[{f['ci95_wilson'][0]:.3f}, {f['ci95_wilson'][1]:.3f}]); mean return {f['mean_return']:.2f}")
+        if f.get("choice"):
+            print(f["choice"])
     for v in res.get("videos", []):
         print("video:", v)
     if "video_skipped" in res:

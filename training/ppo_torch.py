@@ -309,13 +309,21 @@ def default_out(args: Args) -> Path:
 
 def train(args: Args, env=None, log=print, on_update=None):
     """Train into args.out (see the module docstring); returns (agent, results dict).
-    env: a vector env to use instead of make_env(args) (tests); on_update(row): called after each update."""
+    env: a vector env to use instead of make_env(args) (tests); on_update(row): called after each update.
+    The folder's lock is held meanwhile (training.run_folder.run_lock): a second run into it is refused at once."""
+    from training.run_folder import run_lock
+    out = default_out(args).resolve()
+    with run_lock(out):
+        return _train(dataclasses.replace(args, out=str(out)), env, log, on_update)
+
+
+def _train(args: Args, env=None, log=print, on_update=None):
     if args.quick:
         args = quick_args(args)
     made_env = env is None
     if made_env:
         check_args(args)
-    out = default_out(args).resolve()
+    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.torch_threads)
     device = resolve_device(args.device)
@@ -569,17 +577,31 @@ def parse_args(argv=None, ap=None) -> Args:
 def parse_sets(items) -> dict:
     """{field: value} from FIELD=VALUE strings, values read as YAML ("0.5" a float, "{kind: circle}" a dict)."""
     import yaml
+
+    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
     out = {}
     for item in items:
-        if "=" not in item:
+        if "=" not in item or not item.split("=", 1)[0].strip():
             raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
         key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
+        try:
+            out[key.strip()] = yaml_load(value)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"--set {item!r}: the value {value!r} is not valid YAML ({' '.join(str(exc).split())}); "
+                             "quote it in the shell, e.g. --set 'table={kind: circle, radius: 0.2}'") from None
     return out
 
 
 def main(argv=None):
-    return train(parse_args(list(sys.argv[1:] if argv is None else argv)))
+    from training.run_folder import RunFolderError, check_new_folder
+    args = parse_args(list(sys.argv[1:] if argv is None else argv))
+    try:
+        if args.out:  # (a new run: never over another run's files; the study commands pick their own folders)
+            check_new_folder(args.out)
+        return train(args)
+    except RunFolderError as exc:  # another run's folder: a usage error, as argparse reports one (exit status 2)
+        print(f"ppo_torch: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":

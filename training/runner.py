@@ -78,13 +78,22 @@ def make_train_env(env_id: str, num_envs: int, seed: int):
 
 
 def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out_csv: Path,
-                          best_model: Path | None = None):
+                          best_model: Path | None = None, confirm_episodes: int | None = None,
+                          confirm_seed: int | None = None, load=None):
     """An SB3 callback: every `every` env steps, run `episodes` deterministic episodes (fixed
     seeds) and log eval/success_rate (from info["is_success"]) and eval/mean_return to SB3's
     logger (CSV, TensorBoard) and to out_csv. With best_model, the model of the best evaluation
     (success rate, ties broken by mean return) is saved there and its scores next to it (best.json).
-    A resumed run (a model with timesteps already) keeps the rows of out_csv and the best so far."""
+    A resumed run (a model with timesteps already) keeps the rows of out_csv and the best so far.
+
+    With confirm_episodes, the choice is confirmed when training ends (training.best_choice): the best candidate
+    and the final model each play the same confirm_episodes fresh episodes (seeds from confirm_seed), and
+    best_model.zip keeps the one that does better there (the final model on a tie). Picked from evaluations of
+    `episodes` episodes alone, it was noise: a checkpoint that scored 1.0 on 32 episodes scored 0.65 on more, the
+    final model 0.95. best.json then records both, with their 95 % Wilson intervals. load(path): the model class's
+    load (to play the saved candidate)."""
     from stable_baselines3.common.callbacks import BaseCallback
+    from training.best_choice import confirm_best
     from training.episodes import run_episodes
 
     best_json = None if best_model is None else Path(best_model).with_name("best.json")
@@ -139,6 +148,11 @@ def success_eval_callback(env_id: str, every: int, episodes: int, seed: int, out
             # the final model, unless the last evaluation was just before (PPO ends on a rollout multiple)
             if not self.rows or self.num_timesteps - self.rows[-1][0] >= every / 2:
                 self._evaluate()
+            if best_model is not None and confirm_episodes and best_json.is_file() and load is not None:
+                final_row = (self.num_timesteps, *self.rows[-1][1:])
+                confirm_best(env_id, self.model, best_model, best_json, load, final_row,
+                             confirm_episodes, confirm_seed if confirm_seed is not None else seed + 100_000,
+                             episodes)
 
     return SuccessEval()
 
@@ -184,8 +198,8 @@ def progress_lines_callback(total: int, every_seconds: float, curve=None, print_
 
 
 def _checkpoint_steps(path: Path) -> int:
-    part = path.stem.split("_")[-2]
-    return int(part) if part.isdigit() else -1
+    from training.run_folder import checkpoint_steps
+    return checkpoint_steps(path)
 
 
 def checkpoint_callback(save_freq: int, folder: Path, save_replay_buffer: bool, keep_replay_buffers: bool,
@@ -260,23 +274,27 @@ def progress_csv(path: Path, keep_until: int | None):
     return out
 
 
-def latest_checkpoint(path) -> Path:
-    """The model zip to resume from: PATH itself (a .zip), or the newest checkpoint of a run folder
-    (PATH/checkpoints/model_<steps>_steps.zip, by steps). ValueError if there is none."""
-    path = Path(path)
-    if path.is_file():
-        return path
-    found = sorted(Path(path, "checkpoints").glob("model_*_steps.zip"), key=_checkpoint_steps)
-    if not found:
-        raise ValueError(f"resume: {path} is neither a model .zip nor a run folder with checkpoints/model_*_steps.zip")
-    return found[-1]
+def latest_checkpoint(path, say=print) -> Path:
+    """The model zip to resume from: PATH itself (a .zip), or the newest intact checkpoint of a run folder
+    (PATH/checkpoints/model_<steps>_steps.zip, by steps; a truncated newer one is skipped, and said:
+    training.run_folder.intact_checkpoint). ValueError (run_folder.RunFolderError) if there is none."""
+    from training.run_folder import intact_checkpoint
+    return intact_checkpoint(path, say)
 
 
-def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_envs: int = 8,
-                hyperparameters: dict | None = None, eval_points: int = 10, eval_episodes: int = 32,
-                checkpoints: int = 2, *, checkpoint_freq: int | None = None, save_replay_buffer: bool = False,
-                keep_replay_buffers: bool = False, resume=None, progress: str | None = None,
-                progress_seconds: float = 30.0, extra_callbacks=()):
+def train_agent(run_dir, *args, **kwargs):
+    """:func:`train_one` with RUN_DIR's lock held (training.run_folder.run_lock): a second run into the same folder
+    is refused at once (run_folder.RunFolderError) instead of interleaving its files with this one's."""
+    from training.run_folder import run_lock
+    with run_lock(run_dir):
+        return train_one(run_dir, *args, **kwargs)
+
+
+def train_one(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_envs: int = 8,
+              hyperparameters: dict | None = None, eval_points: int = 10, eval_episodes: int = 32,
+              checkpoints: int = 2, *, checkpoint_freq: int | None = None, save_replay_buffer: bool = False,
+              keep_replay_buffers: bool = False, resume=None, progress: str | None = None,
+              progress_seconds: float = 30.0, extra_callbacks=(), confirm_episodes: int | None = 100):
     """Train, log, checkpoint and save; returns the model.
 
     checkpoint_freq: env steps between checkpoints (default: timesteps / checkpoints);
@@ -286,7 +304,10 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
     and trained on up to `timesteps` in all, progress.csv continued; progress: None (silent), "bar"
     (SB3's progress bar, for a terminal) or "lines" (a line every progress_seconds). Ctrl-C during
     training saves a checkpoint and raises TrainingInterrupted. RUN_DIR/train_time.json gets the run's
-    training time: this call's wall time plus, when resumed, the time recorded with the checkpoint."""
+    training time: this call's wall time plus, when resumed, the time recorded with the checkpoint.
+    A resume that would change num_envs, env_id, algo, seed or the hyperparameters is refused
+    (run_folder.check_resume). confirm_episodes: the best model is confirmed on that many fresh episodes when
+    training ends (success_eval_callback; None: the best evaluation during training is kept as it is)."""
     import time
 
     import torch
@@ -305,12 +326,16 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
     venv = make_train_env(env_id, num_envs, seed)
     cfg = {"env_id": env_id, "algo": algo, "seed": seed, "timesteps": timesteps, "num_envs": num_envs,
            "hyperparameters": hyper}
+    ckpt = None
+    if resume is not None:  # (checked before this run writes anything)
+        from training.run_folder import check_resume
+        ckpt = latest_checkpoint(resume)
+        check_resume(ckpt, cfg)
     (run_dir / "config.json").write_text(json.dumps(cfg, indent=2))
     before = 0.0
     if resume is None:
         model = Algo("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", **hyper)
     else:
-        ckpt = latest_checkpoint(resume)
         model = Algo.load(ckpt, env=venv, device="cpu")
         buffer = ckpt.with_name(ckpt.name.replace("model_", "model_replay_buffer_").replace(".zip", ".pkl"))
         if hasattr(model, "load_replay_buffer") and buffer.is_file():
@@ -327,7 +352,8 @@ def train_agent(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_
     every = max(1, timesteps // max(1, eval_points))
     ckpt_steps = checkpoint_freq or max(1, timesteps // max(1, checkpoints))
     curve = success_eval_callback(env_id, every, eval_episodes, eval_seed(seed) + 5_000, run_dir / "curve.csv",
-                                  run_dir / "best_model.zip")
+                                  run_dir / "best_model.zip", confirm_episodes, eval_seed(seed) + 7_000,
+                                  lambda path: Algo.load(path, device="cpu"))
     saver = checkpoint_callback(max(1, ckpt_steps // num_envs), run_dir / "checkpoints", save_replay_buffer,
                                 keep_replay_buffers, before or 0.0, t_start)
     callbacks = [curve, saver]

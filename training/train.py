@@ -7,16 +7,20 @@ zero actions on fresh seeds.
 The config (YAML) names env_id, algo (ppo or sac), num_envs, total_timesteps, seed,
 eval_episodes, algo_kwargs and policy_kwargs, and optionally checkpoint_freq (env steps between
 checkpoints, default total_timesteps / 10), curve_points (evaluations during training, default 10)
-and curve_episodes (episodes per evaluation, default 32); --set key=value overrides a top-level field.
+and curve_episodes (episodes per evaluation, default 32); --set key=value overrides a field, and a dotted key one
+hyperparameter (--set algo_kwargs.learning_rate=1e-3).
 
 The run folder (--out; default runs/<config name>; --quick without --out: a new temporary
 directory) has training.runner's layout, which training.evaluate reads: config.json, model.zip,
-best_model.zip (best evaluation success), checkpoints/, curve.csv, progress.csv, TensorBoard
+best_model.zip (the better of the best evaluation during training and the final model on eval_episodes fresh
+episodes; best.json and results.md report both, training.best_choice), checkpoints/, curve.csv, progress.csv, TensorBoard
 events (``tensorboard --logdir runs``), plus results.json and results.md: the trained policy
 against zero and random actions on fresh seeds. The folder is printed at the start and the end.
 On a terminal SB3's progress bar shows; elsewhere (nohup, a scheduler, CI) a line every
 --progress-seconds gives steps, steps/s, the last evaluation's success and the time left.
---resume goes on from a checkpoint (a run folder: its newest; SAC: with its replay buffer), appends to
+--out must be empty or new unless --resume, and one run writes a folder at a time (a lock: training.run_folder).
+--resume goes on from a checkpoint (a run folder: its newest intact one; SAC: with its replay buffer), with the
+same num_envs, env_id, algo, seed and hyperparameters (only total_timesteps may change), appends to
 progress.csv and reports the whole run's training time in results.md. Ctrl-C during training saves a
 checkpoint and prints one line with the exact command that resumes the run. SAC checkpoints keep only the
 newest replay buffer (each holds up to buffer_size transitions) unless --keep-replay-buffers.
@@ -39,27 +43,72 @@ FIELDS = {"env_id", "algo", "num_envs", "total_timesteps", "seed", "eval_episode
           "checkpoint_freq", "curve_points", "curve_episodes"}
 
 
-def load_config(path, overrides=()):
-    """Read and check a training config; unknown or invalid fields raise ValueError naming them."""
-    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
+NESTED = ("algo_kwargs", "policy_kwargs")  # the fields that are mappings: --set algo_kwargs.learning_rate=1e-3
+
+
+def parse_set(item: str) -> tuple[list[str], object]:
+    """(key path, value) of one --set KEY=VALUE: the value read as YAML, a dotted key a path into a mapping field
+    (algo_kwargs.learning_rate). ValueError naming the item otherwise."""
+    from penny_env.envs.yaml_io import safe_load as yaml_load
+    key, eq, value = item.partition("=")
+    path = key.strip().split(".")
+    if not eq or not all(path):
+        raise ValueError(f"--set {item!r}: give KEY=VALUE, e.g. --set seed=1, or a dotted key into "
+                         f"{' or '.join(NESTED)}: --set algo_kwargs.learning_rate=1e-3")
     try:
-        cfg = yaml_load(Path(path).read_text())
+        return path, yaml_load(value)
+    except yaml.YAMLError as exc:
+        first = " ".join(str(exc).split())
+        raise ValueError(f"--set {item!r}: the value {value!r} is not valid YAML ({first}); quote it in the shell, "
+                         "e.g. --set 'policy_kwargs={net_arch: [64, 64]}'") from None
+
+
+def apply_set(cfg: dict, path: list[str], value, item: str) -> None:
+    """cfg[path[0]][path[1]]... = value, making the mappings on the way (a dotted key into algo_kwargs or
+    policy_kwargs); ValueError for an unknown field or a path through a value that is not a mapping."""
+    if path[0] not in FIELDS:
+        raise ValueError(f"--set {item!r}: unknown field {path[0]!r}; known: {sorted(FIELDS)} (one hyperparameter: "
+                         "--set algo_kwargs.learning_rate=1e-3)")
+    if len(path) > 1 and path[0] not in NESTED:
+        raise ValueError(f"--set {item!r}: {path[0]} is not a mapping; dotted keys go into {' or '.join(NESTED)}")
+    node = cfg
+    for depth, key in enumerate(path[:-1]):
+        child = node.get(key)
+        if child is None:
+            child = node[key] = {}
+        if not isinstance(child, dict):
+            raise ValueError(f"--set {item!r}: {'.'.join(path[:depth + 1])} is {child!r}, not a mapping")
+        node = child
+    node[path[-1]] = value
+
+
+def load_config(path, overrides=()):
+    """Read and check a training config; a missing, unreadable or invalid file, unknown or invalid fields and
+    malformed --set items raise ValueError naming them. overrides: KEY=VALUE strings (--set), KEY a field or a
+    dotted path into algo_kwargs / policy_kwargs."""
+    from penny_env.envs.yaml_io import read_text
+    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
+    text = read_text(path, "training config")
+    try:
+        cfg = yaml_load(text)
     except yaml.YAMLError as exc:
         raise ValueError(f"{path}: invalid YAML: {exc}") from None
     if not isinstance(cfg, dict):
         raise ValueError(f"{path}: a training config must be a mapping of fields")
-    for item in overrides:
-        key, _, value = item.partition("=")
-        cfg[key] = yaml_load(value)
-    unknown = set(cfg) - FIELDS
+    unknown = set(map(str, cfg)) - FIELDS
     if unknown:
         raise ValueError(f"{path}: unknown field(s) {sorted(unknown)}; known: {sorted(FIELDS)}")
+    for item in overrides:
+        apply_set(cfg, *parse_set(item), item)
+    for key in ("env_id", "algo"):
+        if not isinstance(cfg.get(key), str):
+            raise ValueError(f"{path}: {key} must be a string, got {type(cfg.get(key)).__name__} {cfg.get(key)!r}")
     import gymnasium as gym
     import penny_env  # noqa: F401  (registers the ids)
-    if cfg.get("env_id") not in gym.registry:
-        raise ValueError(f"{path}: env_id {cfg.get('env_id')!r} is not a registered id")
-    if cfg.get("algo") not in ALGOS:
-        raise ValueError(f"{path}: algo must be one of {ALGOS}, got {cfg.get('algo')!r}")
+    if cfg["env_id"] not in gym.registry:
+        raise ValueError(f"{path}: env_id {cfg['env_id']!r} is not a registered id")
+    if cfg["algo"] not in ALGOS:
+        raise ValueError(f"{path}: algo must be one of {ALGOS}, got {cfg['algo']!r}")
     for key, default in (("num_envs", 8), ("total_timesteps", 100_000), ("seed", 0), ("eval_episodes", 100),
                          ("checkpoint_freq", None), ("curve_points", 10), ("curve_episodes", 32)):
         if default is None:  # checkpoint_freq: ten checkpoints per run unless the config says
@@ -67,8 +116,11 @@ def load_config(path, overrides=()):
         value = cfg.setdefault(key, default)
         if isinstance(value, bool) or not isinstance(value, int) or value < (0 if key == "seed" else 1):
             raise ValueError(f"{path}: {key} must be a {'non-negative' if key == 'seed' else 'positive'} integer, got {value!r}")
-    cfg.setdefault("algo_kwargs", {})
-    cfg.setdefault("policy_kwargs", {})
+    for key in NESTED:
+        if cfg.setdefault(key, {}) is None:
+            cfg[key] = {}
+        if not isinstance(cfg[key], dict):
+            raise ValueError(f"{path}: {key} must be a mapping of hyperparameters, got {type(cfg[key]).__name__}")
     return cfg
 
 
@@ -116,9 +168,19 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
     """Train into the run folder `out` (training.runner's layout), then compare the trained policy
     with zero and random actions; returns the results (also results.json, results.md). Ctrl-C during
     training raises training.runner.TrainingInterrupted after saving a checkpoint."""
-    from training.runner import train_agent
+    from training.run_folder import check_new_folder, run_lock
 
     out = Path(out)
+    with run_lock(out):  # (one run writes a folder at a time: training.run_folder)
+        if resume is None:
+            check_new_folder(out)
+        return _train(cfg, out, quick, resume, progress, progress_seconds, keep_replay_buffers)
+
+
+def _train(cfg, out: Path, quick, resume, progress, progress_seconds, keep_replay_buffers):
+    from training.best_choice import describe
+    from training.runner import train_agent
+
     print(f"output folder: {out}", flush=True)
     total = 2_048 if quick else cfg["total_timesteps"]
     n_eval = 8 if quick else cfg["eval_episodes"]
@@ -135,7 +197,7 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
                         checkpoint_freq=total // 2 if quick else cfg["checkpoint_freq"],
                         save_replay_buffer=cfg["algo"] == "sac", keep_replay_buffers=keep_replay_buffers,
                         resume=resume, progress=progress_mode() if progress is None else progress,
-                        progress_seconds=progress_seconds)
+                        progress_seconds=progress_seconds, confirm_episodes=n_eval)
     this_process = time.perf_counter() - t0
     timing = json.loads((out / "train_time.json").read_text())
     seconds = timing["train_seconds"]  # the whole run, resumed parts included (None: the earlier part's time unknown)
@@ -151,6 +213,8 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
                            n_eval, eval_seed),
         "zero": evaluate(cfg["env_id"], lambda o: np.zeros((len(o),) + act_space.shape, np.float32), n_eval, eval_seed),
     }
+    best = json.loads((out / "best.json").read_text()) if (out / "best.json").is_file() else {}
+    results["best"] = best
     (out / "results.json").write_text(json.dumps(results, indent=2))
     rows = [f"| {name} | {r['mean_return']:.3f} | {r['success_rate']:.3f} | {r['mean_length']:.1f} |"
             for name, r in ((k, results[k]) for k in ("trained", "random", "zero"))]
@@ -166,6 +230,8 @@ def train(cfg, out: Path, quick: bool = False, resume=None, progress: str | None
           f"{total} timesteps on {cfg['num_envs']} vectorized envs {took} (seed {cfg['seed']}); "
           f"evaluation on {n_eval} episodes with seeds from {eval_seed}.", "",
           "| policy | mean return | success rate | mean length |", "|---|---|---|---|", *rows, ""]
+    if describe(best):
+        md += [describe(best) + ".", ""]
     (out / "results.md").write_text("\n".join(md))
     print("\n".join(md))
     print(f"output folder: {out} (python -m training.evaluate {out}; tensorboard --logdir {out})", flush=True)
@@ -178,9 +244,12 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="output folder (default: runs/<config name> under the working "
                                                 "directory; --quick: a new temporary directory)")
     ap.add_argument("--quick", action="store_true", help="a few thousand steps: checks the pipeline, learns nothing")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config field")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a config field (value read as YAML); a dotted key sets one hyperparameter: "
+                         "--set algo_kwargs.learning_rate=1e-3")
     ap.add_argument("--resume", default=None, metavar="PATH",
-                    help="go on from a checkpoint: a model_<steps>_steps.zip or a run folder (its newest checkpoint)")
+                    help="go on from a checkpoint: a model_<steps>_steps.zip or a run folder (its newest intact "
+                         "checkpoint), with the same settings (only total_timesteps may change)")
     ap.add_argument("--progress-seconds", type=float, default=30.0,
                     help="off a terminal: seconds between progress lines (default 30)")
     ap.add_argument("--keep-replay-buffers", action="store_true",
@@ -201,10 +270,13 @@ def main(argv=None):
         out = Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / Path(args.config).stem
     else:
         out = (Path("runs") / Path(args.config).stem).resolve()
+    from training.run_folder import RunFolderError
     from training.runner import TrainingInterrupted, latest_checkpoint
     try:
         return train(cfg, out, quick=args.quick, resume=args.resume, progress_seconds=args.progress_seconds,
                      keep_replay_buffers=args.keep_replay_buffers)
+    except RunFolderError as exc:  # another run's folder, a resume that changes the run: usage errors
+        ap.error(str(exc))
     except KeyboardInterrupt as exc:  # Ctrl-C: one line, no traceback
         if isinstance(exc, TrainingInterrupted):
             where = f"interrupted at {exc.timesteps:,} steps, checkpoint saved: {exc.checkpoint}"

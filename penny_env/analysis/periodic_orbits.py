@@ -130,7 +130,8 @@ def find_periodic(smap: SectionMap, p: int, seeds, iterations: int = 30):
 def classify(J, tol=1e-3) -> tuple[str, np.ndarray]:
     """('hyperbolic' | 'elliptic' | 'parabolic', eigenvalues sorted by modulus) of DF^p."""
     ev = np.linalg.eigvals(J)
-    ev = ev[np.argsort(-np.abs(ev))]
+    # by modulus, then imaginary part: a complex pair ties in modulus, and the order of ties is the CPU sort kernel's
+    ev = ev[np.lexsort((-ev.imag, -np.abs(ev)))]
     if np.abs(ev[0]) > 1 + tol:
         return "hyperbolic", ev
     if np.any(np.abs(ev.imag) > tol):

@@ -94,25 +94,96 @@ def compiles_now(dispatcher):
     return not Path(index).exists()
 
 
-def announce_compile(entry: str, shape: str, kind: int, dispatcher) -> None:
+# What a first compile costs (docs/compile_time.md, a quiet 2-core machine: the vector env step 22-28 s, the single
+# env and the batch API 4-11 s; issue 40: the vector env took about 170 s on a busy 2-core machine at load 5)
+COMPILE_COST = {"vector": "about 30 s on a quiet 2-core machine, 3 minutes or more on a busy or small one",
+                "other": "about 10 s on a quiet 2-core machine, a minute or more on a busy or small one"}
+HEARTBEAT_SECONDS = 30.0  # a "still compiling" line this often while a build runs, so that it does not look hung
+POLL_SECONDS = 0.25       # how often the watcher looks at the build (a sleeping thread: no work for the build)
+
+
+def announce_compile(entry: str, shape: str, kind: int, dispatcher):
     """One line on the "penny_env" logger (at WARNING, which Python prints to stderr when logging is
     not configured; silence it with logging.getLogger("penny_env").setLevel(logging.ERROR)) before
     the first build of ``entry`` for table kind ``kind`` in this process, if numba will compile it
-    (:func:`compiles_now`); nothing when it loads the cache. Once per (entry, kind) per process."""
+    (:func:`compiles_now`), saying what that costs; nothing when it loads the cache. Once per (entry, kind) per
+    process. While the build runs, a watcher thread (:class:`CompileWatch`, returned; None when nothing is
+    announced) logs a line every HEARTBEAT_SECONDS, and one with the elapsed time when it has finished."""
     if (entry, kind) in _ANNOUNCED:
-        return
+        return None
     _ANNOUNCED.add((entry, kind))
     fresh = compiles_now(dispatcher)
     if fresh is False:
-        return
+        return None
     import logging
+    import sys
     verb = "compiling" if fresh else "compiling (or loading from numba's cache)"
-    # (docs/compile_time.md, 2 cores: the vector env step 22-28 s, the single env and the batch API 4-11 s)
-    cost = "about 30 s" if "vector" in entry else "about 10 s"
+    cost = COMPILE_COST["vector" if "vector" in entry else "other"]
+    what = f"the {entry} for table {shape}"
     logging.getLogger("penny_env").warning(
-        f"penny_env: {verb} the {entry} for table {shape}: the first use of a table shape after installing takes "
-        f"{cost} (minutes on a slow or busy machine); numba caches the machine code, later runs load it "
-        "in about a second")
+        f"penny_env: {verb} {what}: the first use of a table shape after installing takes {cost}; a line every "
+        f"{HEARTBEAT_SECONDS:g} s says it is still at it; numba caches the machine code, later runs load it in about "
+        "a second")
+    watch = CompileWatch(what, dispatcher, sys._getframe(1))
+    watch.start()
+    return watch
+
+
+def _compiled_count(dispatcher) -> int:
+    """How many machine-code versions numba holds for ``dispatcher`` (0 before its first compile ends)."""
+    return len(getattr(dispatcher, "overloads", ()) or ())
+
+
+class CompileWatch:
+    """A daemon thread that follows one build from the frame that announced it (the env's or the batch's warm-up):
+    while that frame is still running on its thread, a line every HEARTBEAT_SECONDS ("still compiling ..., 60 s so
+    far"); once it has returned, one line with the build's elapsed time if the dispatcher then holds machine code
+    (nothing if the build failed: its exception says why). It only reads: the build runs as it would without it."""
+
+    def __init__(self, what: str, dispatcher, frame):
+        import threading
+        import time
+        self.what, self.dispatcher, self.frame = what, dispatcher, frame
+        self.before = _compiled_count(dispatcher)
+        self.ident = threading.get_ident()
+        self.t0 = time.perf_counter()
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=self._run, name="penny_env compile watch", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def join(self, timeout=None) -> None:
+        self._thread.join(timeout)
+
+    def _running(self) -> bool:
+        """The announcing frame is still on its thread's stack."""
+        import sys
+        f = sys._current_frames().get(self.ident)
+        while f is not None:
+            if f is self.frame:
+                return True
+            f = f.f_back
+        return False
+
+    def _log(self, text: str) -> None:
+        import logging
+        self.lines.append(text)
+        logging.getLogger("penny_env").warning(text)
+
+    def _run(self) -> None:
+        import time
+        next_line = HEARTBEAT_SECONDS
+        while self._running():
+            elapsed = time.perf_counter() - self.t0
+            if elapsed >= next_line:
+                self._log(f"penny_env: still compiling {self.what}: {elapsed:.0f} s so far (a busy or small machine "
+                          "takes minutes; it is not hung)")
+                next_line += HEARTBEAT_SECONDS
+            time.sleep(POLL_SECONDS)
+        self.frame = None  # (do not keep the caller's locals alive)
+        if _compiled_count(self.dispatcher) > self.before:
+            self._log(f"penny_env: compiled {self.what} in {time.perf_counter() - self.t0:.1f} s")
 
 
 def cacheable(functions) -> bool:

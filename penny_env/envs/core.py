@@ -14,6 +14,7 @@ import numpy as np
 from ..physics import SolverSettings
 from ..backends.interrupts import load_numba
 from ..physics.faults import warn_episode_fault
+from ..physics.tables.registered import ImpactAudit, audited
 from ..physics.validation import as_state, check_inside, real_array
 from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT
 from ..step.config import ConfigError
@@ -88,6 +89,8 @@ class Core:
         if backend != "python":
             load_numba()  # (with Ctrl-C held: backends/interrupts.py)
         self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
+        # a user's registered shape: a sample of the impacts compared with its own h (tables/registered.py)
+        self.audit = ImpactAudit(self.table, self.R) if audited(self.table) else None
         self.ax, self.ay = scene.spawn_axes()
 
     def _backend(self, backend):
@@ -104,6 +107,12 @@ class Core:
             warnings.warn("penny_env: the compiled step cannot run here (numba missing or a table that does not "
                           "compile); using the plain-Python step (backend='python'), much slower", stacklevel=4)
         return chosen
+
+    def named_failure(self, exc, where: str):
+        """A ValueError naming the scene's law or table when ``exc`` was raised inside the user's function (the
+        plain-Python step calls them as written; physics/faults.blame), else None (re-raise ``exc`` as it is)."""
+        from ..physics.faults import blame
+        return blame(exc, self.law, self.table, where)
 
     def entry_points(self, target=None, **options):
         """The env step's entry points (backends/env.py) for ``target`` ("python", "cpu", "cuda"; None: this

@@ -5,13 +5,14 @@ beyond INT64_MAX they failed later with an OverflowError naming no field. A vect
 with num_envs (and max_impacts_in_info): a num_envs the machine cannot hold used to allocate gigabytes
 and die in step() with a MemoryError a minute later. :func:`check_memory` compares the estimate of
 :func:`vector_env_bytes` (the env's own arrays, counted from their shapes and dtypes below; checked
-against tracemalloc's measure in tests/envs/test_limits.py) with the memory available now.
+against tracemalloc's measure in tests/envs/test_limits.py) with the memory this process may still allocate
+(envs/memory.py: MemAvailable, ulimit -v and the cgroup's limit).
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
+
+from .memory import memory_left
 
 INT64_MAX = int(np.iinfo(np.int64).max)
 
@@ -24,19 +25,9 @@ def check_int64(name: str, value) -> int:
 
 
 def available_memory() -> int | None:
-    """Bytes of memory available now: MemAvailable of /proc/meminfo (Linux), else the free physical pages
-    (os.sysconf), else None (unknown: nothing is refused)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
+    """Bytes this process may still allocate: the least of MemAvailable, the address-space limit (ulimit -v) and
+    the cgroup's memory limit (envs/memory.py), or None (unknown: nothing is refused)."""
+    return memory_left()[0]
 
 
 def vector_env_bytes(obs_dim: int, K: int) -> int:
@@ -75,7 +66,8 @@ def check_memory(field: str, value, need: int, what: str) -> None:
     have = available_memory()
     if have is not None and need > have:
         raise ValueError(f"{field} = {value}: {what} needs about {_gib(need)}, more than the {_gib(have)} of memory "
-                         "available on this machine (MemAvailable)")
+                         "available to this process (the least of MemAvailable, the address-space limit of ulimit -v "
+                         "and the cgroup's memory limit)")
 
 
 def _gib(n: int) -> str:

@@ -285,11 +285,20 @@ class PennyEnv(gym.Env):
         obs = np.empty((1, c.obs_dim), dtype=np.float32)
         st = (self._s, self._trig, self._target, self._arc, self._count, self._d, self._steps, self._t)
         self._in_step = True  # cleared once the step's results are all stored (see step's docstring)
-        out = self._fns.env_step(st, a[0], a1, self._consts, obs, self._buf_args)
-        n_imp = out[6]
-        if n_imp > self._capacity:  # more impacts than the buffer holds: the same pure step, a larger buffer
-            self._buffers(n_imp)
+        try:
             out = self._fns.env_step(st, a[0], a1, self._consts, obs, self._buf_args)
+            n_imp = out[6]
+            if n_imp > self._capacity:  # more impacts than the buffer holds: the same pure step, a larger buffer
+                self._buffers(n_imp)
+                out = self._fns.env_step(st, a[0], a1, self._consts, obs, self._buf_args)
+        except Exception as exc:  # a user's law or table raising in the plain-Python step: named, reset needed
+            named = c.named_failure(exc, f"PennyEnv.step at t = {self._t:.6g} s")
+            if named is None:
+                raise
+            raise named from exc
+        if out[6] and c.audit is not None:  # a user's registered shape: its formulas at a sample of the impacts
+            n = out[6]
+            c.audit.check(self._buf.post[:n, :, 0], self._buf.end[:n, 0], f"PennyEnv.step at t = {self._t:.6g} s")
         s, self._trig, self._count, d, self._steps, t, n_imp, reward, terminated, truncated, energy, limit = out
         t_prev = self._t
         self._s = s

@@ -225,12 +225,13 @@ _MERGED = {"params", "torque_limits", "init", "obs_scale"}
 def _yaml_load(path: Path) -> dict:
     import yaml
 
-    from .yaml_io import safe_load
+    from .yaml_io import read_text, safe_load
     try:
-        with open(path) as f:
-            data = safe_load(f)  # (1e-2 is a float, as in YAML 1.2)
-    except FileNotFoundError:
-        raise ConfigError(f"config file not found: {path}") from None
+        text = read_text(path)  # (a folder, a missing file, bytes that are not UTF-8: named)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    try:
+        data = safe_load(text)  # (1e-2 is a float, as in YAML 1.2; a key given twice is refused)
     except yaml.YAMLError as exc:
         raise ConfigError(f"invalid YAML in {path}: {exc}") from None
     if data is None:

@@ -1,7 +1,11 @@
 """YAML reading with the numbers people write: PyYAML follows YAML 1.1, where ``1e-2`` (no dot) is a string,
 not a float, so ``control_dt: 1e-2`` in a scene file failed with "must be a number, got '1e-2'". The
 loader here is PyYAML's safe loader with YAML 1.2's float rule (``1e-2``, ``3E5``, ``.5``, ``-1.5e+3``); every
-other value reads as PyYAML reads it."""
+other value reads as PyYAML reads it, with two refusals (issue 40): a key given twice in one mapping (PyYAML keeps
+the last one silently: a second ``env_id`` won) and nesting deeper than MAX_DEPTH (100,000 levels were a bare
+RecursionError), both as yaml.YAMLError, which every caller reports as invalid YAML naming the file.
+:func:`read_text` reads a config file with errors that name it (a folder, a missing file, bytes that are not
+UTF-8)."""
 from __future__ import annotations
 
 import re
@@ -13,6 +17,7 @@ _FLOAT = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
                         |[-+]?\.(?:inf|Inf|INF)
                         |\.(?:nan|NaN|NAN))$""", re.X)
 _LOADER = []
+MAX_DEPTH = 64  # nesting levels of a config: deeper is no configuration, and recursive code downstream would fail
 
 
 def loader():
@@ -21,7 +26,9 @@ def loader():
         import yaml
 
         class Loader(yaml.SafeLoader):
-            pass
+            def construct_mapping(self, node, deep=False):
+                _refuse_duplicate_keys(self, node)
+                return super().construct_mapping(node, deep)
 
         # replace the float resolver (YAML 1.1's needs a dot) for the characters a float may start with
         Loader.yaml_implicit_resolvers = {k: [(tag, rx) for tag, rx in v if tag != "tag:yaml.org,2002:float"]
@@ -31,7 +38,72 @@ def loader():
     return _LOADER[0]
 
 
-def safe_load(stream):
-    """yaml.safe_load with 1e-2 read as a float (the module docstring)."""
+def _refuse_duplicate_keys(constructor, node) -> None:
+    """yaml's ConstructorError where a mapping gives a key twice (merge keys ``<<`` excepted: explicit keys
+    override merged ones)."""
     import yaml
-    return yaml.load(stream, Loader=loader())  # noqa: S506 (a SafeLoader subclass)
+    seen = {}
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
+        key = constructor.construct_object(key_node, deep=True)
+        try:
+            first = seen.setdefault(key, key_node.start_mark)
+        except TypeError:  # an unhashable key: PyYAML's own error follows
+            continue
+        if first is not key_node.start_mark:
+            raise yaml.constructor.ConstructorError(
+                "while constructing a mapping", node.start_mark,
+                f"found the key {key!r} twice (first on line {first.line + 1}); give each key once", key_node.start_mark)
+
+
+def _nesting_error(levels: str):
+    import yaml
+    return yaml.YAMLError(f"nested {levels} levels deep; a configuration nests at most {MAX_DEPTH} levels")
+
+
+def _depth(data) -> int:
+    """Nesting depth of lists and dicts, without recursion."""
+    deepest, stack = 0, [(data, 1)]
+    while stack:
+        value, level = stack.pop()
+        if isinstance(value, (list, dict)):
+            deepest = max(deepest, level)
+            if level > MAX_DEPTH:
+                break
+            stack.extend((v, level + 1) for v in (value.values() if isinstance(value, dict) else value))
+    return deepest
+
+
+def safe_load(stream):
+    """yaml.safe_load with 1e-2 read as a float, a key given twice and nesting deeper than MAX_DEPTH refused as
+    yaml.YAMLError (the module docstring)."""
+    import yaml
+    try:
+        data = yaml.load(stream, Loader=loader())  # noqa: S506 (a SafeLoader subclass)
+    except RecursionError:
+        raise _nesting_error("thousands of") from None
+    if _depth(data) > MAX_DEPTH:
+        raise _nesting_error(f"more than {MAX_DEPTH}")
+    return data
+
+
+def read_text(path, what: str = "config file") -> str:
+    """The text of a UTF-8 file; ValueError naming ``what`` and the path for a missing file, a folder, an unreadable
+    file, or bytes that are not UTF-8 (they were a bare FileNotFoundError, IsADirectoryError, UnicodeDecodeError)."""
+    from pathlib import Path
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{what} {path} is a folder, not a YAML file")
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ValueError(f"{what} {path}: no such file") from None
+    except OSError as exc:
+        raise ValueError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ValueError(f"{what} {path} is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); save it as "
+                         "UTF-8") from None

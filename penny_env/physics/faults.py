@@ -133,3 +133,52 @@ def warn_episode_fault(limit_name: str, code, law=None, table=None) -> None:
     import warnings
     warnings.warn(f"penny_env: an episode ended, truncated with info['limit'] = {limit_name!r}: "
                   + describe(code, law, table), RuntimeWarning, stacklevel=3)
+
+
+def _code(f):
+    """The code object of a plain function or a bound method, else None."""
+    f = getattr(f, "__func__", f)
+    return getattr(f, "__code__", None)
+
+
+def user_functions(law=None, table=None) -> dict:
+    """{code object: what it is, in words} of the user's functions the event loop calls in plain Python: a
+    registered law's update, a registered table's formulas and methods, a ConvexTable's or a protocol object's
+    h, grad and hessian. penny_env's own are left out (they are tested in the suite)."""
+    out = {}
+    update = getattr(law, "update", None)
+    if update is not None and not getattr(update, "__module__", "").startswith("penny_env."):
+        out[_code(update)] = f"{_law_name(law)} (its update function)"
+    if table is not None:
+        obj = getattr(table, "_obj", None)  # a ProtocolTable: the user's object
+        owner = obj if obj is not None else table
+        cls = type(owner)
+        fns = {"terms": getattr(cls, "terms", None), "hess": getattr(cls, "hess", None),
+               "h": getattr(table, "_h", None) or getattr(owner, "h", None),
+               "grad": getattr(table, "_grad", None) or getattr(owner, "grad", None),
+               "hessian": getattr(owner, "hessian", None)}
+        for label, f in fns.items():
+            module = getattr(getattr(f, "__func__", f), "__module__", None) or ""
+            if f is not None and not module.startswith("penny_env."):
+                out[_code(f)] = f"{_table_name(table)} (its {label})"
+    out.pop(None, None)
+    return out
+
+
+def blame(exc, law=None, table=None, where="") -> ValueError | None:
+    """A ValueError naming the user's law or table when ``exc`` was raised inside one of their functions (its
+    traceback passes through it: the innermost such frame), else None: a law's ``math.sqrt`` of a negative number
+    at an impact used to surface as a bare "math domain error" from simulate()."""
+    codes = user_functions(law, table)
+    culprit = None
+    tb = exc.__traceback__
+    while tb is not None:
+        culprit = codes.get(tb.tb_frame.f_code, culprit)
+        tb = tb.tb_next
+    if culprit is None:
+        return None
+    prefix = f"{where}: " if where else ""
+    fix = ("a law must return two finite numbers for every impact: fix its update function and register it again "
+           "(register_law)" if culprit.startswith("law") else
+           "a table's functions must give finite numbers everywhere on its extent: fix them")
+    return ValueError(f"{prefix}{culprit} raised {type(exc).__name__}: {exc}, called by the event loop; {fix}")

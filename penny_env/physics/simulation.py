@@ -8,9 +8,10 @@ import numpy as np
 
 from .scalar import NO_ARC, flow_penny, impact_buffers, impacts_of, overflowed, relocate_inside, run_interval, scalar_model
 from .flows import flow, end_kinematics, kinetic_energy
-from .faults import check_mapped, fault_error
-from .laws import apply_law, make_law
+from .faults import blame, check_mapped, fault_error
+from .laws import apply_law, make_law, restitution_update
 from .params import PennyParams, SolverSettings
+from .tables.registered import audited, check_impacts, sample
 from .validation import (as_state, check_controls, check_inside, check_params, check_settings, check_speed_bound,
                          check_table, is_real, positive_count, positive_time)
 
@@ -90,6 +91,42 @@ def _free_chunk(state, params, table):
     if W > 0 and table is not None:
         return 4.0 * table.size / (params.R * W)
     return math.inf
+
+
+def elastic_impact_period(state, params, table) -> float:
+    """An upper bound [s] of the time between two impacts of an uncontrolled penny on ``table`` under the elastic
+    law, from its state: inf at rest.
+
+    Between impacts each end moves at the constant speed R sqrt(theta_dot^2 + phi_dot^2) (the rolling and the
+    turning velocities are orthogonal) along a circle or a line. Right after an impact the end crosses the wall
+    inward, so its path leaves the table again within one turn of a circle of radius at most D, the diameter of the
+    extent, or, on a larger circle or a line, within a minor arc of chord at most D: a path of at most 2 pi D. The
+    elastic law keeps (I + m R^2) theta_dot^2 + J phi_dot^2, hence theta_dot^2 + phi_dot^2 >= that / max(I + m R^2,
+    J). Twice that time, for round-off."""
+    energy2 = params.rolling_inertia * state[4] * state[4] + params.J * state[5] * state[5]
+    if not energy2 > 0.0:
+        return math.inf
+    xmin, xmax, ymin, ymax = (float(v) for v in table.extent)
+    diameter = math.hypot(xmax - xmin, ymax - ymin)
+    end_speed = params.R * math.sqrt(energy2 / max(params.rolling_inertia, params.J))
+    return 2.0 * (2.0 * math.pi * diameter) / end_speed
+
+
+def _check_reachable(t_final, t_hit, recorded, state, params, table, law, settings) -> None:
+    """Refuse, right after the first impact of an uncontrolled elastic run to t_final, a run that provably needs more
+    than SolverSettings.max_impacts impacts (elastic_impact_period), rather than after recording them all (t_final =
+    1e12 took 87 s to reach the limit)."""
+    if t_final is None or not (law.update is restitution_update and law.e == 1.0):
+        return
+    period = elastic_impact_period(state, params, table)
+    needed = recorded + math.floor((t_final - t_hit) / period)
+    if needed > settings.max_impacts:
+        reach = t_hit + period * (settings.max_impacts - recorded)
+        raise ValueError(f"t_final={t_final!r}: an elastic penny that hits the wall hits it again at least every "
+                         f"{period:.3g} s (elastic_impact_period), so this run needs at least {needed:.3g} impacts, "
+                         f"beyond SolverSettings.max_impacts = {settings.max_impacts} (bounded memory; no run of this "
+                         f"penny past t = {reach:.3g} s fits in it): ask for less, continue from a shorter run's "
+                         "final_state, or raise SolverSettings.max_impacts")
 
 
 def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impacts=None,
@@ -182,8 +219,15 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
         # the interval, resumed wherever the per-call event cap stopped it (scalar.run_interval, the
         # event loop's one driver), stopping after the n_impacts-th impact
         left = 0 if n_impacts is None else n_impacts - len(times)
-        drive = lambda b: run_interval(state, math.cos(state[3]), math.sin(state[3]), acc1, acc2, dt, model,  # noqa: E731
-                                       table is None, True, left, b, 0, NO_ARC)
+        def drive(b):
+            try:
+                return run_interval(state, math.cos(state[3]), math.sin(state[3]), acc1, acc2, dt, model,
+                                    table is None, True, left, b, 0, NO_ARC)
+            except Exception as exc:  # a user's law or table raising in plain Python: named (faults.blame)
+                named = blame(exc, law, table, f"t = {t0:.6g} s")
+                if named is None:
+                    raise
+                raise named from exc
         s1, elapsed = drive(buf)
         if len(times) + buf.count[0] > settings.max_impacts:
             asked = f"t_final={t_final!r}" if n_impacts is None else f"n_impacts={n_impacts}"
@@ -209,6 +253,8 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             if pinned:  # held against the wall until the interval ends
                 seg_acc[-1] = (0.0, 0.0)
         hit = bool(impacts)
+        if hit and u is None and n_impacts is None and len(times) == len(impacts):  # (the run's first impacts)
+            _check_reachable(t_final, times[0], len(times), state, params, table, law, settings)
         if n_impacts is not None and len(times) >= n_impacts:
             t = times[-1]
             break
@@ -236,6 +282,10 @@ def simulate(state, *, params=None, table, law="elastic", t_final=None, n_impact
             seg_t.append(t0)
             seg_s.append(state)
             seg_acc.append((0.0, 0.0))  # set at the top of the loop
+    if audited(table):  # a user's registered shape: its formulas against its own h where the penny hit
+        pick = sample(len(states))
+        check_impacts(table, np.array(states).reshape(-1, 6)[pick], np.array(ends)[pick], params.R,
+                      row_names=[f"simulate, t = {times[j]:.6g} s" for j in pick])
     S = np.array(state, dtype=float)[:, None]
     final = S[:, 0].copy()
     traj = Trajectory(np.array(times), np.array(ends, dtype=np.int8), np.array(states).reshape(-1, 6),
@@ -280,6 +330,12 @@ def impact_map(state, *, params=None, table, end, law="elastic") -> np.ndarray:
     if abs(g) > 1e-8 * table.size:
         label = "front" if end == 1 else "back"
         raise ValueError(f"state: the {label} end is not on the wall (h = {g:.3g})")
-    post = apply_law(S, float(end), params, table, law)
+    try:
+        post = apply_law(S, float(end), params, table, law)
+    except Exception as exc:  # a user's law raising: named (faults.blame)
+        named = blame(exc, law, table, "state")
+        if named is None:
+            raise
+        raise named from exc
     check_mapped(S, post, float(end), params, table, law, "state")  # (the guard of the event loop, for the map)
     return post[:, 0]

@@ -61,3 +61,39 @@ def test_contention_quick(capsys, reports_untouched):
     for row in rows:
         quiet, busy = float(row.split("|")[4]), float(row.split("|")[5])
         assert quiet > 0 and busy > 0
+
+
+def test_a_build_says_it_is_still_at_it_and_how_long_it_took(caplog, monkeypatch):
+    # issue 40, item 13: on a busy machine the first build took about 170 s with one line at its start: it looked hung
+    import time
+    from penny_env.backends import cache as compiled
+    monkeypatch.setattr(compiled, "HEARTBEAT_SECONDS", 0.05)
+    monkeypatch.setattr(compiled, "POLL_SECONDS", 0.005)
+
+    def warm_up(f, fail=False):
+        watch = compiled.announce_compile("watched vector env step", "Shape", 97 if not fail else 96, f)
+        for _ in range(200_000):  # wait (by events, not by a clock) for the first "still compiling" line
+            if watch.lines:
+                break
+            time.sleep(0.001)
+        if fail:
+            raise RuntimeError("numba could not compile")
+        f(1)
+        return watch
+
+    for key in (("watched vector env step", 97), ("watched vector env step", 96)):
+        compiled._ANNOUNCED.discard(key)
+    with caplog.at_level(logging.WARNING, logger="penny_env"):
+        watch = warm_up(numba.njit(lambda x: x + 2))
+        watch.join()
+        failing = numba.njit(lambda x: x + 3)
+        with pytest.raises(RuntimeError):
+            warm_up(failing, fail=True)
+    lines = [r.getMessage() for r in caplog.records if r.name == "penny_env"]
+    first = lines[0]
+    assert first.startswith("penny_env: compiling the watched vector env step for table Shape") and \
+        "3 minutes or more on a busy or small one" in first
+    assert watch.lines[0].startswith("penny_env: still compiling the watched vector env step for table Shape: ")
+    assert "it is not hung" in watch.lines[0]
+    assert re.match(r"penny_env: compiled the watched vector env step for table Shape in [0-9.]+ s$", watch.lines[-1])
+    assert sum(line.startswith("penny_env: compiled ") for line in lines) == 1  # (the failed build says nothing more)

@@ -2,6 +2,7 @@
 integers beyond int64, a num_envs the machine cannot hold (saying how much it needs), torque limits that leave
 no room for the scene's initial speeds (blaming the field the user set), and YAML's 1e-2."""
 import math
+import os
 import tracemalloc
 
 import gymnasium as gym
@@ -70,6 +71,62 @@ def test_a_num_envs_beyond_the_memory_says_how_much_it_needs(monkeypatch):
 def test_the_available_memory_is_read():
     have = limits.available_memory()
     assert have is None or 2 ** 20 < have < 2 ** 50
+
+
+def _fake_machine(root, meminfo_kib, cgroup=None, v1=None, vmsize_kib=None):
+    """A /proc and /sys under root: MemAvailable, the process's cgroup file and limits."""
+    (root / "proc/self").mkdir(parents=True)
+    (root / "proc/meminfo").write_text(f"MemTotal: 99999999 kB\nMemAvailable: {meminfo_kib} kB\n")
+    (root / "proc/self/status").write_text(f"Name: python\nVmSize: {vmsize_kib or 0} kB\n")
+    lines = ["0::/job"] + (["4:memory:/batch/job"] if v1 else [])
+    (root / "proc/self/cgroup").write_text("\n".join(lines) + "\n")
+    if cgroup is not None:  # v2: the job's cgroup under a parent without a limit
+        d = root / "sys/fs/cgroup/job"
+        d.mkdir(parents=True)
+        (root / "sys/fs/cgroup/memory.max").write_text("max\n")
+        (d / "memory.max").write_text(f"{cgroup[0]}\n")
+        (d / "memory.current").write_text(f"{cgroup[1]}\n")
+    if v1 is not None:  # v1: the limit is set on the parent cgroup (batch), the job's own says "no limit"
+        for rel, limit, usage in (("batch", v1[0], v1[1]), ("batch/job", 9223372036854771712, v1[1])):
+            d = root / "sys/fs/cgroup/memory" / rel
+            d.mkdir(parents=True)
+            (d / "memory.limit_in_bytes").write_text(f"{limit}\n")
+            (d / "memory.usage_in_bytes").write_text(f"{usage}\n")
+
+
+def test_the_memory_left_reads_the_cgroup_limits_too(tmp_path):
+    # MemAvailable 64 GiB, but the job's cgroup allows 2 GiB with 0.5 GiB used: 1.5 GiB left
+    from penny_env.envs.memory import memory_left
+    gib = 2 ** 30
+    _fake_machine(tmp_path / "v2", 64 * 2 ** 20, cgroup=(2 * gib, gib // 2))
+    assert memory_left(tmp_path / "v2") == (3 * gib // 2, "the cgroup's memory limit")
+    _fake_machine(tmp_path / "v1", 64 * 2 ** 20, v1=(3 * gib, gib))
+    assert memory_left(tmp_path / "v1") == (2 * gib, "the cgroup's memory limit")
+    _fake_machine(tmp_path / "none", 64 * 2 ** 20)
+    assert memory_left(tmp_path / "none") == (64 * gib, "MemAvailable")
+
+
+def test_the_memory_left_reads_the_address_space_limit(tmp_path, monkeypatch):
+    # ulimit -v 4 GiB with 1 GiB mapped: 3 GiB left, though MemAvailable says 64 GiB
+    resource = pytest.importorskip("resource", reason="RLIMIT_AS is POSIX")
+    from penny_env.envs.memory import memory_left
+    gib = 2 ** 30
+    _fake_machine(tmp_path, 64 * 2 ** 20, vmsize_kib=2 ** 20)
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (4 * gib, resource.RLIM_INFINITY))
+    assert memory_left(tmp_path) == (3 * gib, "the address-space limit RLIMIT_AS, ulimit -v")
+
+
+def test_a_num_envs_beyond_the_address_space_limit_is_refused_up_front(monkeypatch):
+    # the issue's run: under ulimit -v, num_envs = 5e6 was accepted and numpy's MemoryError came 137 s later
+    resource = pytest.importorskip("resource", reason="RLIMIT_AS is POSIX")
+    if not os.path.exists("/proc/self/status"):
+        pytest.skip("the mapped size is read from /proc/self/status (Linux)")
+    with open("/proc/self/status") as f:
+        mapped = next(int(ln.split()[1]) * 1024 for ln in f if ln.startswith("VmSize:"))
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (mapped + 2 ** 30, resource.RLIM_INFINITY))
+    with pytest.raises(ValueError, match=r"num_envs = 5000000: .* more than the [0-9.]+ [GM]iB of memory available to "
+                                         r"this process .*ulimit -v"):
+        pe.PennyVectorEnv(5 * 10 ** 6, backend="python")
 
 
 @pytest.mark.parametrize("scene, task, K", [("ellipse", "reach", 8), ("stadium", "impacts", 32)])

@@ -166,3 +166,91 @@ def test_a_class_whose_formulas_change_runs_the_new_ones(shapes):
     pe.register_table("mutable", cls)
     after = scalar_model(P, table, L, S)
     assert after.kind != before.kind and T.COMPILED_FORMULAS[after.kind][0] is cls.terms
+
+
+# -- formulas that differ from h between the grid's points: caught where the penny hits (issue 40, item 2) ------
+def bump_terms(c, x, y):
+    """The disc's h minus A sin^2(k (x + r)) sin^2(k (y + r)): zero on every line of the 41 x 41 comparison grid."""
+    r2, inv, A, k, r = c[0], c[1], c[2], c[3], c[4]
+    sx, sy = np.sin(k * (x + r)), np.sin(k * (y + r))
+    cx, cy = np.cos(k * (x + r)), np.cos(k * (y + r))
+    h = (x * x + y * y - r2) * 0.5 * inv - A * sx * sx * sy * sy
+    return h, x * inv - 2.0 * A * k * sx * cx * sy * sy, y * inv - 2.0 * A * k * sy * cy * sx * sx
+
+
+class BumpDisc(Disc):
+    """repro_table_between_grid.py: terms lie up to A = 3 mm outside the table's own wall between the grid lines."""
+
+    name = "bumpdisc"
+    terms = staticmethod(bump_terms)
+
+    def __init__(self, r, A=3e-3):
+        super().__init__(r)
+        self.A = float(A)
+        k = np.pi / (2 * self.r / 40)
+        self.grad_bound = 1.0 + 2 * self.A * k + 0.05  # bounds true for the formulas
+        self.hessian_bound = 1.0 / self.r + 4 * self.A * k * k + 1.0
+
+    def constants(self):
+        return (self.r * self.r, 1.0 / self.r, self.A, float(np.pi / (2 * self.r / 40)), self.r)
+
+    hessian = None  # (no third-order certificate: its bound would be false for the bumps, as in the repro)
+
+
+def test_formulas_that_differ_from_h_between_the_grid_points_are_caught_at_impacts(shapes):
+    from penny_env.physics.tables import registered
+    shapes("bumpdisc", BumpDisc)
+    table = BumpDisc(0.15)
+    registered.check_registered(table)  # the grid check cannot see it...
+    named = r"table bumpdisc \(BumpDisc\): at an impact at \(x, y\) = .* its formula terms gives h = .* where the " \
+            r"table's own h and grad give h = .*differ from the table between the points of the 41 x 41 grid"
+    rng = np.random.default_rng(1)  # the repro's first penny (its run raised nothing: 272 impacts, ended 3 mm out)
+    s0 = [rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), 0.0, rng.uniform(-np.pi, np.pi), rng.uniform(-40, 40),
+          rng.uniform(-5, 5)]
+    with pytest.raises(ValueError, match=r"simulate, t = [0-9.e-]+ s: " + named):  # ...the impacts can
+        pe.simulate(s0, table=table, law="elastic", t_final=3.0)
+    # (the check follows the run, whatever ran it: the batch's plain-Python loop here, the compiled step below)
+    with pytest.raises(ValueError, match=r"penny 0, t = [0-9.e-]+ s: " + named):
+        pb.simulate(np.array([s0]), table=table, t_final=3.0, backend="python")
+    for backend in ("python", "numba"):
+        env = pe.PennyEnv("circle", "reach", table={"kind": "bumpdisc", "r": 0.15}, backend=backend)
+        env.reset(seed=0, options={"state": s0})
+        with pytest.raises(ValueError, match=r"PennyEnv.step at t = [0-9.e-]+ s: " + named):
+            for _ in range(400):
+                env.step(np.zeros(2, np.float32))
+
+
+def test_a_sound_shape_and_penny_envs_own_pass_the_impact_check(shapes, monkeypatch):
+    from penny_env.physics.tables import registered
+    shapes("disc", Disc)
+    assert registered.audited(Disc(0.1)) and not registered.audited(pe.Ellipse(0.15, 0.2)) and not registered.audited(None)
+    tr = pe.simulate([0, 0, 0, 1.0, 20.0, 0.5], table=Disc(0.1), t_final=8.0)
+    assert tr.n_impacts > 10
+    registered.check_impacts(Disc(0.1), tr.impact_states, tr.impact_ends, pe.PennyParams().R)  # every impact passes
+    # penny_env's own shapes: never compared (nothing spent on them)
+    calls = []
+    monkeypatch.setattr(registered, "check_impacts", lambda *a, **k: calls.append(a))
+    pe.simulate([0, 0, 0, 1.0, 20.0, 0.5], table=pe.Ellipse(0.15, 0.2), t_final=2.0)
+    pb.simulate(np.array([[0, 0, 0, 1.0, 20.0, 0.5]]), table=pe.Ellipse(0.15, 0.2), t_final=2.0, backend="python")
+    assert pe.PennyEnv("ellipse", "reach", backend="python")._core.audit is None and calls == []
+
+
+def test_the_environments_sample_their_impacts():
+    from penny_env.physics.tables.registered import AUDIT_EVERY, AUDIT_FIRST, ImpactAudit
+    seen = []
+    audit = ImpactAudit(None, 0.01)
+    import penny_env.physics.tables.registered as registered
+
+    def record(table, states, ends, R, where=""):
+        seen.extend(states[:, 0].tolist())
+    orig = registered.check_impacts
+    registered.check_impacts = record
+    try:
+        for start in range(0, 2 * AUDIT_FIRST + 10 * AUDIT_EVERY, 7):  # steps of 7 impacts each
+            states = np.zeros((7, 6))
+            states[:, 0] = np.arange(start, start + 7)
+            audit.check(states, np.ones(7))
+    finally:
+        registered.check_impacts = orig
+    n = 2 * AUDIT_FIRST + 10 * AUDIT_EVERY
+    assert [int(v) for v in seen if v < n] == [i for i in range(n) if i < AUDIT_FIRST or i % AUDIT_EVERY == 0]

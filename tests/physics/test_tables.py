@@ -27,6 +27,56 @@ def test_built_in_tables_pass_the_grid_checks(table):
     assert r == table.inradius
 
 
+class _TieOrder:
+    """numpy, except that argsort returns equal values in index order (reverse=False) or the reverse: the two ends of
+    what a CPU's sort kernel may return for ties (issue 40: 5,727 grid points tie at the rounded rectangle's flat
+    bottom, and numpy's AVX2 kernel returned 512 of them that miss the middle)."""
+
+    def __init__(self, reverse):
+        self.reverse = reverse
+
+    def __getattr__(self, name):
+        return getattr(np, name)
+
+    def argsort(self, a, *args, **kwargs):
+        a = np.asarray(a)
+        idx = np.arange(a.size)
+        return np.lexsort((-idx if self.reverse else idx, a))
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_the_inradius_check_does_not_hang_on_the_order_of_equal_values(monkeypatch, reverse):
+    # a flat-bottomed h, built-in and as a user's ConvexTable: the verdict is the same whatever the tie order
+    from penny_env.physics.tables import convex
+    monkeypatch.setattr(convex, "np", _TieOrder(reverse))
+    rr = pe.RoundedRectangle(0.3, 0.2, 0.04)
+    ext = tuple(1.05 * v for v in rr.extent)
+    assert check_on_grid("rr", rr.h, rr.grad, rr.grad_bound, rr.hessian_bound, ext, grid=121, inradius=0.1,
+                         hessian=rr.hessian) == 0.1
+    user = pe.ConvexTable(rr.h, rr.grad, grad_bound=1.0, hessian_bound=25.0, extent=ext, inradius=0.1, name="flat")
+    assert user.inradius == 0.1
+    with pytest.raises(ValueError, match=r"inradius=0.11 is larger than any disk inside the table"):
+        pe.ConvexTable(rr.h, rr.grad, grad_bound=1.0, hessian_bound=25.0, extent=ext, inradius=0.11)
+
+
+def test_the_inradius_check_measures_distance_to_the_wall_not_depth():
+    # a circle of radius 0.15 whose h is deepest near x = 0.13 (h weighted by exp(40 x)): its deepest grid points
+    # are far from the centre, yet the disk of radius 0.149 fits (refused before: "at most 0.0647 found")
+    R, k = 0.15, 40.0
+
+    def h(x, y):
+        return (x * x + y * y - R * R) * np.exp(k * x) / (2 * R)
+
+    def grad(x, y):
+        e = np.exp(k * x) / (2 * R)
+        return (2 * x + k * (x * x + y * y - R * R)) * e, 2 * y * e
+
+    t = pe.ConvexTable(h, grad, grad_bound=1e3, hessian_bound=1e5, extent=(-0.16, 0.16, -0.16, 0.16), inradius=0.149)
+    assert t.inradius == 0.149
+    with pytest.raises(ValueError, match="is larger than any disk inside the table"):
+        pe.ConvexTable(h, grad, grad_bound=1e3, hessian_bound=1e5, extent=(-0.16, 0.16, -0.16, 0.16), inradius=0.16)
+
+
 @pytest.mark.parametrize("table", BUILT_IN, ids=repr)
 def test_wall_distance_spawn_axes_and_boundary(table):
     ang = np.linspace(0, 2 * np.pi, 721)

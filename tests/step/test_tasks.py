@@ -102,6 +102,53 @@ def test_a_task_is_checked_when_it_is_registered():
     assert "t1" not in TASKS
 
 
+class _BigK(NamedTuple):
+    length_scale: float
+    tolerance: float
+    progress_weight: float
+    ctrl_cost: float
+    success_bonus: float
+    target_scale: float
+    heading_offset: float
+    budget: int
+
+
+def _big_constants(scene, task, L):
+    return _BigK(*reach.constants(scene, task, L), 2 ** 70)
+
+
+def _reward3(k, before, after, ctrl, n_arc, xp):
+    return 1.0, True, 0
+
+
+def _reward_array(k, before, after, ctrl, n_arc, xp):
+    return np.array([1.0, 2.0]), True
+
+
+def _constants_raise(scene, task, L):
+    return 1 / 0
+
+
+@pytest.mark.parametrize("stages, error, match", [
+    ((reach.constants, _reward3), TypeError, r"register_task\('t9'\): reward must return \(reward, success\), got 3"),
+    ((reach.constants, _reward_array), TypeError, r"register_task\('t9'\): reward must return real numbers.*ndarray"),
+    ((_big_constants, reach.reward), ValueError, r"task 't9': constants field budget = 1180591620717411303424 does "
+                                                 r"not fit the int64"),
+    ((_constants_raise, reach.reward), ValueError, r"register_task\('t9'\): constants .*ZeroDivisionError"),
+])
+def test_a_stage_that_cannot_run_is_refused_naming_the_task_and_the_stage(stages, error, match):
+    # issue 40, item 9: each was a bare error (too many values to unpack, only 0-dimensional arrays ...,
+    # OverflowError, ZeroDivisionError) at env build, naming neither the task nor the stage
+    @dataclass(frozen=True)
+    class Cfg(reach.ReachTask):
+        kind: str = "t9"
+
+    constants, reward = stages
+    with pytest.raises(error, match=match):
+        register_task(TaskRecord("t9", Cfg, constants, reward, reach.target))
+    assert "t9" not in TASKS
+
+
 @pytest.mark.fast
 def test_a_task_field_of_another_kind_is_refused_naming_it():
     from penny_env.step.config import UnknownFieldError

@@ -107,6 +107,16 @@ def test_work_precision_quick(reports_untouched):
     assert "![work-precision, impact times](wp.png)" in text
 
 
+def test_the_stability_hang_detector_has_ten_times_the_slowest_case(monkeypatch):
+    # the long-horizon case took 112-117 s on a quiet 2-core machine, where the 120 s budget reported a FAIL
+    from studies import stability
+    budgets = []
+    monkeypatch.setattr(stability, "run_case", lambda name, fn, quick, budget: (budgets.append(budget), ([], 0.0))[1])
+    stability.main(["--only", "long horizon"])
+    stability.main(["--quick", "--only", "long horizon"])
+    assert budgets[0] >= 10 * 117 and budgets[1] >= 10 * 5
+
+
 def test_stability_quick(reports_untouched):
     from studies import stability
     out = reports_untouched / "st.md"
@@ -117,9 +127,10 @@ def test_stability_quick(reports_untouched):
     for name in names:
         assert f"| {name} |" in text
     assert "checks passed" in text
-    # every check reports a verdict and measurements; no case may hang or crash the runner
+    # every check reports a verdict and measurements; no case may hang or crash the runner (its budget, a hang
+    # detector, is ten times the slowest case on a slow machine: issue 40)
     for name, _, rs, wall in results:
-        assert rs and wall < 60
+        assert rs
         for r in rs:
             assert isinstance(r["passed"], bool) and "measured" in r
             assert "no result within" not in " ".join(r["reasons"])

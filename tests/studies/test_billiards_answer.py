@@ -63,6 +63,29 @@ def test_the_ellipse_has_an_elliptic_period_two_orbit_with_an_island():
     assert po.classify(axis[0][1])[0] == "hyperbolic" and abs(po.classify(axis[0][1])[1][0]) > 1e3
 
 
+class _TiesReversed:
+    """numpy, except that argsort returns equal values last index first (what another CPU's sort kernel may do)."""
+
+    def __getattr__(self, name):
+        return getattr(np, name)
+
+    def argsort(self, a, *args, **kwargs):
+        a = np.asarray(a)
+        return np.lexsort((-np.arange(a.size), a))
+
+
+@pytest.mark.parametrize("ties", ["numpy", "reversed"])
+def test_classify_orders_a_complex_pair_whatever_the_sort_kernel(monkeypatch, ties):
+    # the pair e^(+-i a) ties in modulus: its order must not be left to the CPU's sort kernel
+    if ties == "reversed":
+        monkeypatch.setattr(po, "np", _TiesReversed())
+    a = 0.3
+    J = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 0.5]])
+    for P_ in (np.eye(3), np.eye(3)[[1, 0, 2]], np.eye(3)[[2, 1, 0]]):
+        kind, ev = po.classify(P_ @ J @ P_.T)
+        assert kind == "elliptic" and ev[0].imag > 0 > ev[1].imag and abs(ev[2] - 0.5) < 1e-12
+
+
 def test_the_elastic_circle_is_integrable_hence_not_ergodic():
     """|beta| is invariant along every elastic circle orbit (to round-off over 3000 impacts) and differs between
     orbits: an invariant function that is not constant, so the map is not ergodic."""

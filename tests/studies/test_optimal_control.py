@@ -366,17 +366,15 @@ def test_impact_study_bad_input_names_the_field():
 
 
 def test_impact_quick_run_writes_outside_docs(tmp_path):
-    """--quick: one ellipse pair, every actuation, witnesses included, in well under a minute; the saved rows
-    rewrite the same report (--report-only); never into docs/."""
+    """--quick: one ellipse pair, every actuation, witnesses included; the saved rows rewrite the same report
+    (--report-only); never into docs/. (No wall-time assertion: its 60 s failed at load 5, issue 40. The timeout
+    only tells a hang from a slow run: 10 times the quick run on a busy 2-core machine.)"""
     import subprocess
     import sys
-    import time
     from studies import impact_oc as io
     root = oc.Path(io.__file__).resolve().parents[1]
-    t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "studies.impact_oc", "--quick", "--out", str(tmp_path / "oc.md")],
-                   cwd=root, check=True, capture_output=True, timeout=120)
-    assert time.perf_counter() - t0 < 60
+                   cwd=root, check=True, capture_output=True, timeout=1200)
     text = (tmp_path / "oc.md").read_text()
     for act in ("both controls, park", "steer only, park", "drive only, reach"):
         assert f"| {act} | time | all | 1 |" in text

@@ -65,6 +65,28 @@ def _origin_inradius(h, extent, size: float, n: int = 720) -> float:
     return float(np.sqrt((closest ** 2).sum(1)).min() * (1.0 - 1e-12))
 
 
+WALL_DISTANCE_CHUNK = 1024  # grid points per block of (points x wall samples) distances: 1024 x 720 x 16 B = 12 MB
+
+
+def _largest_wall_distance(pts, wall) -> float:
+    """The largest distance from any of the points ``pts`` (k, 2) to the nearest of the wall samples ``wall``
+    (m, 2), computed over every point, in blocks of WALL_DISTANCE_CHUNK (bounded memory).
+
+    It bounds the radius of any disk inside the table: the samples lie on the wall, so a point's distance to the
+    nearest sample is at least its distance to the wall, and the centre of an inscribed disk of radius r is within
+    half a grid cell of a grid point whose distance to the wall is at least r - cell / 2. Every inside point is
+    taken, not the deepest few by h: h's depth is not the distance to the wall (a flat-bottomed h ties at
+    thousands of points, and which of them a sort returns first depends on the CPU's sort kernel), so the verdict
+    depends on neither the order of equal values nor the machine."""
+    best = 0.0
+    wx, wy = wall[None, :, 0], wall[None, :, 1]
+    for start in range(0, len(pts), WALL_DISTANCE_CHUNK):
+        block = pts[start:start + WALL_DISTANCE_CHUNK]
+        dx, dy = block[:, 0, None] - wx, block[:, 1, None] - wy  # (by component: a sum over a last axis of 2 is slow)
+        best = max(best, float(np.sqrt((dx * dx + dy * dy).min(axis=1).max())))
+    return best
+
+
 def check_on_grid(owner: str, h, grad, grad_bound: float, hessian_bound: float, extent, grid: int = 97,
                   inradius=None, hessian=None, edge_may_touch=False) -> float:
     """Check a table's callables and numbers on a grid x grid sampling of its extent; returns the
@@ -131,10 +153,7 @@ def check_on_grid(owner: str, h, grad, grad_bound: float, hessian_bound: float, 
     estimate = float(np.max(-H[inside]) / grad_bound)
     if inradius is None:
         return max(estimate, _origin_inradius(h, extent, size))
-    # the largest distance from a grid point to the wall bounds any inscribed disk's radius
-    wall = _ray_boundary(h, extent, 720)
-    cand = pts[np.argsort(H[inside])[:512]]  # the deepest grid points
-    reach = np.sqrt(((cand[:, None, :] - wall[None, :, :]) ** 2).sum(-1)).min(axis=1).max()
+    reach = _largest_wall_distance(pts, _ray_boundary(h, extent, 720))
     cell = math.hypot(hx, hy)
     if inradius > reach + cell:
         raise ValueError(f"{owner}.inradius={inradius} is larger than any disk inside the table "

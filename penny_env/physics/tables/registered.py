@@ -112,3 +112,90 @@ def check_registered(table) -> None:
         _CHECKED[table] = True
     except TypeError:
         pass
+
+
+# -- at impacts: the formulas against the table's own h where the penny hits (issue 40, item 2) ----------------
+AUDIT_SAMPLE = 64     # impacts of one simulate() / batch call compared (evenly spaced over its impacts)
+AUDIT_FIRST = 256     # an environment compares every impact of its first AUDIT_FIRST...
+AUDIT_EVERY = 64      # ...then one impact in AUDIT_EVERY
+GRAD_RTOL = 1e-8      # the formula's gradient against grad, relative to the largest |grad h| of the sample
+
+
+def audited(table) -> bool:
+    """The table is a registered shape from outside penny_env whose formulas (terms) the event loop runs: its
+    impacts are compared with its own h (penny_env's own shapes are tested in the suite and cost nothing here)."""
+    if table is None:
+        return False
+    cls = type(table)
+    if cls.__module__.startswith("penny_env.") or cls.terms is None:
+        return False
+    from .base import compiled_kind
+    return compiled_kind(cls) >= 0
+
+
+def check_impacts(table, states, ends, R: float, where: str = "", row_names=None) -> None:
+    """ValueError naming the table when, at an impact, its formula ``terms`` and its own ``h`` and ``grad`` disagree
+    at the end that hit the wall. states: (k, 6) post-impact states (the end's position is the impact's), ends:
+    (k,) +1 / -1; where: what ran (the message's prefix), or row_names[i] for row i. Only for :func:`audited`
+    tables; the callers pass a sample of their impacts.
+
+    The grid check (check_formulas_on_grid) compares them on 41 x 41 points; formulas that agree there and differ
+    between the points (a term that vanishes on every grid line) passed it, and the run-time guard, which measures
+    depth with the same formulas, could not see it: pennies left the table's own wall by 3 mm. At an impact the
+    formula's h is 0 by construction, so the table's own h there says how far the wall the penny hit lies from the
+    table's wall."""
+    if not audited(table):
+        return
+    S = np.asarray(states, dtype=float).reshape(-1, 6)
+    if S.shape[0] == 0:
+        return
+    e = np.asarray(ends, dtype=float).reshape(-1)
+    px = S[:, 0] + e * R * np.cos(S[:, 3])
+    py = S[:, 1] + e * R * np.sin(S[:, 3])
+    with np.errstate(all="ignore"):
+        h = np.asarray(table.h(px, py), dtype=float) * np.ones_like(px)
+        gx, gy = (np.asarray(g, dtype=float) * np.ones_like(px) for g in table.grad(px, py))
+    c, _, _ = grid(table)
+    terms = type(table).terms
+    got = np.array([terms(c, float(x), float(y)) for x, y in zip(px, py)], dtype=float).reshape(-1, 3)
+    tol_h = 1e-8 * float(table.size)  # the run-time guard's tolerance for an end outside the wall (faults.OUTSIDE_TOL)
+    tol_g = GRAD_RTOL * max(float(np.max(np.hypot(gx, gy))), 1e-300)
+    err_h = np.abs(got[:, 0] - h)
+    err_g = np.hypot(got[:, 1] - gx, got[:, 2] - gy)
+    bad = ~(np.isfinite(got).all(axis=1) & (err_h <= tol_h) & (err_g <= tol_g))
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    where = row_names[i] if row_names is not None else where
+    prefix = f"{where}: " if where else ""
+    raise ValueError(f"{prefix}{owner_of(table)}: at an impact at (x, y) = ({px[i]:.6g}, {py[i]:.6g}) its formula terms "
+                     f"gives h = {got[i, 0]:.3g}, grad = ({got[i, 1]:.6g}, {got[i, 2]:.6g}) where the table's own h and "
+                     f"grad give h = {h[i]:.3g}, grad = ({gx[i]:.6g}, {gy[i]:.6g}): the formulas the event loop runs "
+                     f"differ from the table between the points of the {GRID} x {GRID} grid they were checked on, so "
+                     "the penny bounced off another wall than the table's (h is what the checks, the resets and the "
+                     "renderer use); make terms and hess compute exactly h, grad and hessian")
+
+
+def sample(n: int, k: int = AUDIT_SAMPLE) -> np.ndarray:
+    """k evenly spaced indices of n impacts (all of them when n <= k), first and last included."""
+    if n <= k:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, k).round().astype(np.int64))
+
+
+class ImpactAudit:
+    """The environments' sample of impacts for :func:`check_impacts`: every impact of the first AUDIT_FIRST, then
+    one in AUDIT_EVERY, counted over the environment's life."""
+
+    def __init__(self, table, R: float):
+        self.table, self.R, self.seen = table, float(R), 0
+
+    def check(self, states, ends, where: str = "") -> None:
+        """states (k, 6) post-impact states and ends (k,) of a step's impacts, in order."""
+        k = len(ends)
+        idx = np.arange(self.seen, self.seen + k)
+        take = (idx < AUDIT_FIRST) | (idx % AUDIT_EVERY == 0)
+        self.seen += k
+        if take.any():
+            check_impacts(self.table, np.asarray(states, dtype=float).reshape(-1, 6)[take],
+                          np.asarray(ends)[take], self.R, where)

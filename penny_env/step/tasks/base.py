@@ -184,7 +184,14 @@ def check_constants(record: TaskRecord, k) -> None:
     backends/packing.py)."""
     if not (isinstance(k, tuple) and hasattr(k, "_fields")):
         raise TypeError(f"task {record.name!r}: constants() must return a NamedTuple, got {type(k).__name__}")
+    hints = getattr(type(k), "__annotations__", {})
     for name, v in zip(k._fields, k):
         if type(v) not in (int, float, bool):
             raise TypeError(f"task {record.name!r}: constants field {name} must be an int, float or bool, got "
                             f"{type(v).__name__}")
+        declared = hints.get(name)
+        declared = getattr(declared, "__forward_arg__", getattr(declared, "__name__", declared))
+        # an int field travels as an int64 (backends/packing.py): 2**70 was a bare OverflowError at env build
+        if type(v) is int and declared != "float" and not -(1 << 63) <= v < (1 << 63):
+            raise ValueError(f"task {record.name!r}: constants field {name} = {v} does not fit the int64 it travels "
+                             "as; use a smaller integer, or declare the field a float")
