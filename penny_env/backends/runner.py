@@ -81,8 +81,8 @@ class CpuRunner:
 
     outputs = "numpy"
 
-    def __init__(self, fns, consts, p, n: int, K: int, obs_dim: int, n_act: int, counts_arc: bool):
-        self.fns, self.consts, self.p = fns, consts, p
+    def __init__(self, fns, consts, p, n: int, K: int, obs_dim: int, n_act: int, counts_arc: bool, audit=None):
+        self.fns, self.consts, self.p, self.audit = fns, consts, p, audit
         self.n, self.K, self.obs_dim, self.n_act, self.counts_arc = n, K, obs_dim, n_act, counts_arc
         self.same_step = p.autoreset == SAME_STEP
         self.st = new_state(n)
@@ -94,8 +94,10 @@ class CpuRunner:
         # step's host time at N = 1): the arc counts and guard faults, the done flags, the empty post-impact states
         # and rest flags (the env does not keep them), SAME_STEP's final observations, the counts' template
         final = (n if self.same_step else 0, obs_dim)
+        # (post-impact states only where a user's table is audited at its impacts: physics/tables/registered.py)
+        Kp = K if audit is not None else 0
         self._scratch = (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8), np.empty(n, dtype=bool),
-                         np.empty((0, 6, n)), np.empty((0, n), dtype=np.int8), np.empty(final, dtype=np.float32),
+                         np.empty((Kp, 6, n)), np.empty((Kp, n), dtype=np.int8), np.empty(final, dtype=np.float32),
                          np.full(n, K, dtype=np.int64), np.empty(n, dtype=np.int64))
 
     def load_actions(self, actions) -> None:
@@ -122,6 +124,11 @@ class CpuRunner:
     def step(self) -> StepOutputs:
         out, buf, times, ends = self.buffers()
         self.step_envs(tuple(self.st), self.actions, self.consts, out, buf)
+        if self.audit is not None:  # a user's registered shape: its formulas against its own h at a sample of impacts
+            counts, post = buf[0], buf[3]
+            for i in np.flatnonzero(counts):
+                k = min(int(counts[i]), self.K)
+                self.audit.check(post[:k, :, i], ends[i, :k], f"PennyVectorEnv.step, env {i}")
         return StepOutputs(StepResults(*out), buf[0], times, ends)
 
     def reset(self, keys, episodes, rows, states=None, targets=None):

@@ -211,7 +211,8 @@ class PennyVectorEnv(VectorEnv):
                                       self.cuda_options.get("kernels", "split"))
             return core
         self._fns = core.entry_points()
-        self._runner = CpuRunner(self._fns, self._consts, self._p, n, K, core.obs_dim, core.n_act, core.counts_arc)
+        self._runner = CpuRunner(self._fns, self._consts, self._p, n, K, core.obs_dim, core.n_act, core.counts_arc,
+                                 core.audit)
         if core.backend == "numba":  # the machine code loaded (or compiled) now, not inside a step or a reset
             announce_compile("vector env step", "open plane" if core.table is None else type(core.table).__name__,
                              self._m.kind, self._fns.step_envs.__wrapped__)
@@ -314,7 +315,13 @@ class PennyVectorEnv(VectorEnv):
             self._warn_faults(self._limits)  # the guard faults of the episodes this step resets
         # from here to the end of the runner's step the bookkeeping must run whole (class docstring)
         self._in_step = True
-        out = runner.step()
+        try:
+            out = runner.step()
+        except Exception as exc:  # a user's law or table raising in the plain-Python step: named, reset needed
+            named = self._core.named_failure(exc, "PennyVectorEnv.step")
+            if named is None:
+                raise
+            raise named from exc
         self._in_step = False
         res = out.results
         self._extend_trails()

@@ -218,6 +218,11 @@ def test_formulas_that_differ_from_h_between_the_grid_points_are_caught_at_impac
         with pytest.raises(ValueError, match=r"PennyEnv.step at t = [0-9.e-]+ s: " + named):
             for _ in range(400):
                 env.step(np.zeros(2, np.float32))
+        vec = pe.PennyVectorEnv(2, "circle", "reach", table={"kind": "bumpdisc", "r": 0.15}, backend=backend)
+        vec.reset(seed=0, options={"state": s0})
+        with pytest.raises(ValueError, match=r"PennyVectorEnv.step, env [01]: " + named):
+            for _ in range(400):
+                vec.step(np.zeros((2, 2)))
 
 
 def test_a_sound_shape_and_penny_envs_own_pass_the_impact_check(shapes, monkeypatch):
