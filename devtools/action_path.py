@@ -23,17 +23,19 @@ ROOT = Path(__file__).resolve().parents[1]
 def crossed(env, actions) -> tuple[list, int]:
     """(the package's source files called into while stepping ``actions``, the deepest stack of package frames)."""
     import penny_env
+    from penny_env.backends.generated import generated_dir
     pkg = str(Path(penny_env.__file__).resolve().parent)
+    generated = str(generated_dir())
     files: dict = {}
     depth = [0, 0]
 
     def hook(frame, event, arg):
         if event == "call":
             f = frame.f_code.co_filename
-            inside = f.startswith(pkg) or "penny_env_generated" in f
+            inside = f.startswith(pkg) or f.startswith(generated)
             if inside:
                 files.setdefault(str(Path(f).resolve().relative_to(Path(pkg).parent))
-                                 if f.startswith(pkg) else Path(f).name, None)
+                                 if f.startswith(pkg) else "(generated) " + Path(f).name, None)
                 d, g = 0, frame
                 while g is not None:
                     if g.f_code.co_filename.startswith(pkg):

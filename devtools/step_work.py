@@ -1,4 +1,4 @@
-"""Work per env-step by preset (issue 10.6: why PennyPark-Stadium-v0 at N = 4096 ran slower).
+"""Work per env-step by preset (why PennyPark-Stadium-v0 at N = 4096 ran slower).
 
     python -m devtools.step_work [--n 256] [--steps 292] [--quick]
 

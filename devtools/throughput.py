@@ -211,16 +211,11 @@ def _targets(single_rows, pend_us: float, big) -> list[str]:
 
 def update_readme(path: str, lines: list[str]) -> None:
     """Put the report's tables (and its machine, date and command lines) between the README's markers."""
+    from studies.common import replace_block
     start, end = "<!-- throughput:start -->", "<!-- throughput:end -->"
-    with open(path) as f:
-        text = f.read()
-    if start not in text or end not in text:
-        raise ValueError(f"{path}: no {start} ... {end} block to replace")
     body = [ln.replace("## ", "#### ", 1) if ln.startswith("## ") else ln for ln in lines[2:]]
-    head, rest = text.split(start, 1)
-    _, tail = rest.split(end, 1)
-    with open(path, "w") as f:
-        f.write(head + start + "\n" + "\n".join(body) + "\n" + end + tail)
+    if not replace_block(path, start, end, "\n".join(body)):
+        raise ValueError(f"{path}: no {start} ... {end} block to replace")
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ the fast kernel without a register cap or with 64): the measurement that chose t
 (backends/env.FAST_MAX_REGISTERS, the split into a fast and a rare kernel).
 
 It needs a CUDA GPU with numba-cuda and torch. Where there is none (the CUDA simulator does not count: it
-measures nothing about a GPU) it prints so and writes no report. Targets (issue 30): env.step at least 1e9
+measures nothing about a GPU) it prints so and writes no report. Targets: env.step at least 1e9
 env-steps/s at the best N, at least 0.8 of the kernels alone at N >= 65,536, at least 1.2e7 at N = 4096.
 """
 from __future__ import annotations

@@ -401,14 +401,10 @@ def _span(r):
 
 
 def update_block(path: Path, block: str) -> bool:
-    """Rewrite the text between the question2-answer markers of a file; False where it has none."""
-    text = path.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        return False
-    head, rest = text.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
-    path.write_text(f"{head}{README_BEGIN}\n{block}\n{README_END}{tail}")
-    return True
+    """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
+    the block) rewritten; False where the file has none (studies/common.replace_block)."""
+    from studies.common import replace_block
+    return replace_block(path, README_BEGIN, README_END, block)
 
 
 # -- the report ------------------------------------------------------------------------------------------------
@@ -558,7 +554,7 @@ def write_report(res, s, out, argv, cfg, seconds):
               "larger of two estimates: between the orbits' exponents, and from batch means of the per-collision "
               "log-stretch pooled over every orbit (10 batches per orbit). At small rho the free flights are "
               "heavy-tailed (the stretch of a collision grows with the flight before it), so both estimates converge "
-              "slowly and the error bar is itself uncertain: an independent code (the referee's of issue 39) "
+              "slowly and the error bar is itself uncertain: an independent code "
               "differed from an earlier run of this one by about 3 of its (8-orbit) standard errors at rho = 0.03 "
               "and 0.003. The difference column is therefore not a test at "
               "the scale of the SE; what is checked is the agreement within the formula's "
@@ -703,7 +699,7 @@ DISSIPATIVE_TEXT = [
     "bouncing at the last impact followed, or wedged: the penny lies as a chord of the wall with both ends on it, and "
     "its ends hit alternately with flights below 1e-12 s (at least 10 in a row at the end). This is a real Zeno "
     "accumulation of the **sequential single-impact model** (the paper's law applied to one end at a time), not an "
-    "artefact: an independent replay (the referee's of issue 39) reproduced such an orbit's impact sequence to 4 "
+    "artefact: an independent replay reproduced such an orbit's impact sequence to 4 "
     "digits for 25 impacts, front and back alternating, the gaps shrinking by about e each time; here "
     "tests/studies/test_billiards_answer.py checks a wedged orbit's flights, both ends on the wall and its speed "
     "falling at every impact. But each impact removes only a small share of the "

@@ -1,4 +1,4 @@
-"""A validated lower bound on the control rows of every impact-free plan with both controls (issue 39, item 8).
+"""A validated lower bound on the control rows of every impact-free plan with both controls.
 
 Without an impact the penny moves as on the open plane. With steering |phi''| <= a1 and rolling |theta''| <= a2
 (a_i = u_i,max / inertia), piecewise constant over rows of length dt:

@@ -145,3 +145,24 @@ def write(path: str, lines: list[str]) -> None:
     os.makedirs(d, exist_ok=True)
     with open(path, "w") as f:
         f.write("\n".join(lines).rstrip() + "\n")
+
+
+def replace_text_block(text: str, begin: str, end: str, block: str) -> str | None:
+    """``text`` with what lies between the markers ``begin`` and ``end`` replaced by ``block`` (on lines of its own),
+    or None where it lacks them."""
+    if begin not in text or end not in text:
+        return None
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    return f"{head}{begin}\n{block}\n{end}{tail}"
+
+
+def replace_block(path, begin: str, end: str, block: str) -> bool:
+    """The file's text between the markers replaced by ``block`` (the README's answer blocks, the reports that quote
+    them); False where the file lacks the markers (nothing written)."""
+    path = Path(path)
+    new = replace_text_block(path.read_text(), begin, end, block)
+    if new is None:
+        return False
+    path.write_text(new)
+    return True

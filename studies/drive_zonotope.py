@@ -1,4 +1,4 @@
-"""The exact fewest control rows of a drive-only plan without impacts (issue 39, item 8), with a validated certificate.
+"""The exact fewest control rows of a drive-only plan without impacts, with a validated certificate.
 
 Drive only (u1 = 0) and no impact: phi_dot is the start's omega forever (theorem T3.1), so the heading is
 phi(t) = phi0 + omega t whatever the rolling torque, and over K rows of length dt with scaled torques v_k in [-1, 1]

@@ -1,4 +1,4 @@
-"""A fair chance for pure RL on the single-input probes (issue 20, item 4): SB3 PPO and SAC retrained with a
+"""A fair chance for pure RL on the single-input probes: SB3 PPO and SAC retrained with a
 long discount, a wall-neutral reward and stated budgets, and SAC with the certified witnesses' transitions
 in its replay buffer, evaluated on the witness study's pair seeds beside the witness.
 

@@ -1,4 +1,4 @@
-"""A fair chance for learned agents on the single-input probes (issue 20, item 4): imitation of the certified
+"""A fair chance for learned agents on the single-input probes: imitation of the certified
 witnesses (studies/witness.py), behaviour cloning then DAgger, evaluated on held-out seeds beside the witness.
 
     python -m studies.fair_rl [--quick] [--out docs/fair_rl.md] [--cells Steer:ellipse:elastic ...]

@@ -1,4 +1,4 @@
-"""Optimal control where impacts can pay (issue 20, item 5): fast starts near the wall, targets near the
+"""Optimal control where impacts can pay: fast starts near the wall, targets near the
 wall, single-input problems over horizons long enough to be feasible, and a multi-start search over
 impact sequences seeded from the certified witnesses.
 
@@ -620,14 +620,11 @@ def readme_block(summary, margin=MARGIN) -> str:
             "with impacts exists, not that none without does, and no plan with impacts is shown optimal.")
 
 
-def update_readme(readme: Path, block: str) -> bool:
-    text = readme.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        return False
-    head, rest = text.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
-    readme.write_text(f"{head}{README_BEGIN}\n{block}\n{README_END}{tail}")
-    return True
+def update_readme(path: Path, block: str) -> bool:
+    """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
+    the block) rewritten; False where the file has none (studies/common.replace_block)."""
+    from studies.common import replace_block
+    return replace_block(path, README_BEGIN, README_END, block)
 
 
 def answer(summary, margin=MARGIN) -> list[str]:

@@ -1,4 +1,4 @@
-"""Measure what the README's two commands cost on this machine (issue 21.8): each one runs as written,
+"""Measure what the README's two commands cost on this machine: each one runs as written,
 step by step, in a fresh copy of the checkout with a fresh virtual environment; the report gives each
 step's wall time, the virtual environment's size after each install, the machine's load average and,
 for the test command, pytest's counts.
@@ -254,16 +254,17 @@ def readme_sentence(part: str, result: dict | None, readme: str) -> str:
 def update_readme(path: Path, results: dict) -> None:
     """Rewrite each part's sentence between its markers; ValueError if a marker is missing."""
     import textwrap
+
+    from studies.common import replace_text_block
     text = path.read_text()
     for part in PARTS:
         begin, end = (m.format(part=part) for m in README_MARKS)
-        if begin not in text or end not in text:
-            raise ValueError(f"{path}: no {begin} ... {end} markers")
-        head, rest = text.split(begin, 1)
-        _, tail = rest.split(end, 1)
         sentence = textwrap.fill(readme_sentence(part, results.get(part), text), width=110, break_long_words=False,
                                  break_on_hyphens=False)
-        text = f"{head}{begin}\n{sentence}\n{end}{tail}"
+        new = replace_text_block(text, begin, end, sentence)
+        if new is None:
+            raise ValueError(f"{path}: no {begin} ... {end} markers")
+        text = new
     path.write_text(text)
 
 

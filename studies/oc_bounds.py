@@ -1,5 +1,4 @@
-"""Certified lower bounds on the control rows of every impact-free plan (docs/optimal_control.md, issue 32 item 5,
-issue 39 items 1 and 8).
+"""Certified lower bounds on the control rows of every impact-free plan (docs/optimal_control.md).
 
 Without an impact the penny moves exactly as on the open plane, so a bound for the plane holds for every
 impact-free plan on a table. A plan reaches the terminal set at the end of a control row (the shooting problems of

@@ -35,6 +35,7 @@ _TABLES = ("penny_env/physics/tables/base.py", "penny_env/physics/tables/ellipse
 _BATCH = ("penny_env/physics/batch_loops.py", "penny_env/backends/pennies.py", "penny_env/backends/builder.py",
           "penny_env/backends/physics.py", "penny_env/backends/batch.py")
 _ENV = ("penny_env/backends/builder.py", "penny_env/backends/env.py", "penny_env/backends/packing.py",
+        "penny_env/backends/runner.py",
         "penny_env/step/functional.py", "penny_env/step/draws.py", "penny_env/envs/core.py",
         "penny_env/step/tasks/base.py", "penny_env/step/tasks/reach.py", "penny_env/step/tasks/park.py",
         "penny_env/step/tasks/impacts.py", "penny_env/envs/scene.py", "penny_env/presets/envs.yaml",
@@ -126,6 +127,11 @@ REPORTS = {
                               ("training/ppo_torch.py", "studies/ppo_torch_report.py", "configs/train/ppo_torch_gpu.yaml") + _CUDA
                               + _ENV + _PHYSICS
                               + _TABLES),
+    "docs/ladder.md": ("python -m studies.ladder",
+                       ("studies/ladder.py", "studies/cells.py", "configs/ladder/cpu.yaml", "training/protocol.py",
+                        "training/ppo_torch.py", "training/ppo_heading.py", "training/ppo_rnd.py", "training/her_sac.py",
+                        "training/start_curriculum.py", "training/go_explore.py", "penny_env/envs/vector_env.py")
+                       + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
@@ -156,7 +162,8 @@ MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "devtools.compile_time": "docs/compile_time.md",
                   "studies.ppo_compare": "docs/ppo_torch.md",
                   "devtools.throughput_gpu": "docs/throughput_gpu.md",
-                  "studies.ppo_torch_report": "docs/ppo_torch_gpu.md"}
+                  "studies.ppo_torch_report": "docs/ppo_torch_gpu.md",
+                  "studies.ladder": "docs/ladder.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")

@@ -4,7 +4,7 @@
                                 [--seeds 2] [--num-envs 8192] [--num-steps 32] [--curve-points 10]
                                 [--eval-episodes 200] [--device auto] [--env-backend cuda] [--quick] [--out REPORT.md]
 
-The question (issue 30 item 7): does pure RL learn the single-input probes when it gets GPU-scale experience? At
+The question: does pure RL learn the single-input probes when it gets GPU-scale experience? At
 CPU budgets it did not (docs/fair_pure_rl.md: steer park 0/400 at 2M PPO steps per seed). Each cell (probe,
 table, law: training/witness_study.cell_spec gives its env id and field overrides) trains training/ppo_torch.py's
 PPO with fair_pure_rl's reward (``REWARD``: the success bonus only, so that going to the wall first costs

@@ -35,7 +35,7 @@ from penny_env.physics.params import MIN_GAP
 EPS = 2.220446049250313e-16
 # The hang detector's wall-clock budget per case [s]: at least 10 times the slowest case on the slowest machine
 # we know of. The long-horizon case took 50 s on the machine that wrote docs/stability.md and 112-117 s on another
-# quiet 2-core machine (issue 40: its 120 s budget then reported a FAIL), so 1200 s; --quick's slowest case takes a
+# quiet 2-core machine (its 120 s budget then reported a FAIL), so 1200 s; --quick's slowest case takes a
 # few seconds there, so 300 s. A budget only tells a hang from a slow run; it measures nothing.
 CASE_BUDGET = 1200.0
 QUICK_CASE_BUDGET = 300.0

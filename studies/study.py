@@ -1,4 +1,4 @@
-"""The RL study "does controllability of the penny need impacts?" (issue 11).
+"""The RL study "does controllability of the penny need impacts?".
 
     python -m studies.study [--config configs/study/default.yaml] [--runs runs/study] [--out docs/study.md]
                              [--workers N] [--ray] [--quick]
@@ -16,7 +16,6 @@ configs/study/quick.yaml (a few minutes on 2 cores, learns nothing) and never wr
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -26,6 +25,7 @@ import yaml
 
 from training.policies import REFERENCE_AGENTS
 from training.runner import ALGOS
+from studies.jobs import check_ray, finished, run_jobs
 from studies.study_report import PROBES, job_dir, split_cell
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -147,18 +147,6 @@ def make_jobs(cfg) -> list[dict]:
     return jobs
 
 
-def finished(runs, job) -> bool:
-    """The job has a result, made with this very job (cell, agent, seed, budgets, hyperparameters, episodes):
-    a result of a job whose config has changed since is stale and runs again."""
-    path = job_dir(runs, job) / "result.json"
-    if not path.is_file():
-        return False
-    try:
-        return json.loads(path.read_text())["job"] == job
-    except (ValueError, KeyError, TypeError):  # unreadable: run it again
-        return False
-
-
 def run_job(job: dict, runs: str) -> dict:
     """Train (RL agents) and evaluate one job; returns its result (the caller writes result.json)."""
     import csv
@@ -184,70 +172,6 @@ def run_job(job: dict, runs: str) -> dict:
     episodes = run_episodes(job["cell"], policy, job["eval_episodes"], eval_seed(job["seed"]))
     return {"job": job, "episodes": episodes, "curve": curve, "seconds": time.perf_counter() - t0,
             "cpu_seconds": time.process_time() - c0}
-
-
-def _finish(runs, result):
-    path = job_dir(runs, result["job"]) / "result.json"
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result))
-    tmp.replace(path)  # atomic: result.json exists only for a finished job
-
-
-def _pool(todo, runs, workers):
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    import multiprocessing as mp
-    from tqdm import tqdm
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
-        futures = [ex.submit(run_job, job, str(runs)) for job in todo]
-        failed = []
-        for fut in tqdm(as_completed(futures), total=len(futures), desc="jobs", unit="job"):
-            try:
-                _finish(runs, fut.result())
-            except Exception as exc:  # keep the other jobs going; a rerun retries this one
-                failed.append(f"{futures.index(fut)}: {type(exc).__name__}: {exc}")
-    _raise_failed(failed, todo)
-
-
-def _raise_failed(failed, todo):
-    if failed:
-        lines = [f"  {todo[int(f.split(':')[0])]['cell']} {todo[int(f.split(':')[0])]['agent']} "
-                 f"seed {todo[int(f.split(':')[0])]['seed']}: {f.split(': ', 1)[1]}" for f in failed]
-        raise RuntimeError(f"{len(failed)} job(s) failed (the others are saved; rerun to retry):\n" + "\n".join(lines))
-
-
-def check_ray():
-    try:
-        import ray  # noqa: F401
-    except ImportError:
-        raise ValueError('--ray needs Ray, which is not installed: '
-                         'the ray extra (pip install -e ".[ray]" in the clone)') from None
-
-
-def _ray(todo, runs, workers):
-    import ray
-    from tqdm import tqdm
-    address = os.environ.get("RAY_ADDRESS") or None
-    env = {"env_vars": {"PYTHONPATH": os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)}}
-    if address is None:
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, runtime_env=env)
-    else:
-        ray.init(address=address, log_to_driver=False)
-    try:
-        task = ray.remote(num_cpus=1)(run_job)
-        refs = [task.remote(job, str(runs)) for job in todo]
-        index = {r: i for i, r in enumerate(refs)}
-        pending, failed = list(refs), []
-        with tqdm(total=len(pending), desc="jobs (ray)", unit="job") as bar:
-            while pending:
-                done, pending = ray.wait(pending, num_returns=1)
-                try:
-                    _finish(runs, ray.get(done[0]))
-                except Exception as exc:  # a RayTaskError wraps the job's exception
-                    failed.append(f"{index[done[0]]}: {type(exc).__name__}: {exc}")
-                bar.update(1)
-    finally:
-        ray.shutdown()
-    _raise_failed(failed, todo)
 
 
 def main(argv=None):
@@ -276,14 +200,14 @@ def main(argv=None):
     except ValueError as exc:
         ap.error(str(exc))
     jobs = make_jobs(cfg)
-    todo = [j for j in jobs if not finished(runs, j)]
+    todo = [j for j in jobs if not finished(runs, j, job_dir)]
     stale = sum((job_dir(runs, j) / "result.json").is_file() for j in todo)
     print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already finished in {runs}"
           + (f"; {stale} with a result of another config (budgets, hyperparameters...) run again" if stale else ""),
           flush=True)
     t0 = time.perf_counter()
     if todo:
-        (_ray if args.ray else _pool)(todo, runs, args.workers)
+        run_jobs(run_job, todo, runs, args.workers, job_dir, ray=args.ray)
     from studies.study_report import write_report
     write_report(cfg, jobs, runs, out, argv=argv if argv is not None else sys.argv[1:],
                  seconds=time.perf_counter() - t0)

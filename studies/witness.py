@@ -230,7 +230,7 @@ class Witness:
         self.cands = self.family.candidates()
         self.max_steps = self.env.spec.max_episode_steps
         # the time limit once: an override max_episode_steps= is the real episode's (gym.make took it above), and
-        # passing it beside **overrides gave make_vec the keyword twice (issue 39 item 2)
+        # passing it beside **overrides gave make_vec the keyword twice
         vec_kwargs = {**self.overrides, "max_episode_steps": self.max_steps}
         self.vec = gym.make_vec(env_id, num_envs=len(self.cands), vectorization_mode="vector_entry_point",
                                 **vec_kwargs)

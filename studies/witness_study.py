@@ -299,14 +299,11 @@ def _count_md(c) -> str:
     return f"{c['witnessed']}/{c['pairs']}{tail}"
 
 
-def update_readme(readme: Path, answer: str) -> bool:
-    text = readme.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        return False
-    head, rest = text.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
-    readme.write_text(f"{head}{README_BEGIN}\n{answer}\n{README_END}{tail}")
-    return True
+def update_readme(path: Path, answer: str) -> bool:
+    """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
+    the block) rewritten; False where the file has none (studies/common.replace_block)."""
+    from studies.common import replace_block
+    return replace_block(path, README_BEGIN, README_END, answer)
 
 
 def _span(values, fmt: str) -> str:

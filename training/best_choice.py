@@ -1,4 +1,4 @@
-"""Which model a run calls its best (issue 40, item 15): the best evaluation during training is a candidate, chosen
+"""Which model a run calls its best: the best evaluation during training is a candidate, chosen
 among a few noisy evaluations (32 episodes each by default: a checkpoint that scored 1.0 there scored 0.65 on more
 episodes, where the final model scored 0.95). When training ends the candidate and the final model play the same
 fresh episodes, enough of them (training.train: the config's eval_episodes), and the better one there is kept as

@@ -1,5 +1,5 @@
 """A run folder is written by one run at a time, and a resumed run goes on from an intact checkpoint of the same
-run (issue 40, items 7 and 8).
+run.
 
 * :func:`run_lock` holds an exclusive lock (``RUN_DIR/.lock``, filelock: flock on POSIX, msvcrt on Windows) while a
   run writes. A second run into the same folder is refused at once, naming the folder: two runs used to interleave

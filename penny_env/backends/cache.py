@@ -95,7 +95,7 @@ def compiles_now(dispatcher):
 
 
 # What a first compile costs (docs/compile_time.md, a quiet 2-core machine: the vector env step 22-28 s, the single
-# env and the batch API 4-11 s; issue 40: the vector env took about 170 s on a busy 2-core machine at load 5)
+# env and the batch API 4-11 s; the vector env took about 170 s on a busy 2-core machine at load 5)
 COMPILE_COST = {"vector": "about 30 s on a quiet 2-core machine, 3 minutes or more on a busy or small one",
                 "other": "about 10 s on a quiet 2-core machine, a minute or more on a busy or small one"}
 HEARTBEAT_SECONDS = 30.0  # a "still compiling" line this often while a build runs, so that it does not look hung

@@ -3,9 +3,9 @@ real lines: the CPU loops with their bodies in place (builder.hoisted_source), t
 glue (builder.Builder.kernel), the law dispatch and the constants' unpacking (packing.py).
 
 A generated module is named after what it holds and a hash of its source, and written once into the first
-writable folder of: $PENNY_ENV_GENERATED_DIR, the package's ``backends/_generated`` (a checkout or a
-writable install; git-ignored), the user's cache ($XDG_CACHE_HOME or ~/.cache, then penny_env/generated),
-the system's temporary folder. It is never rewritten with other content (its name changes with it), so its
+writable folder of: $PENNY_ENV_GENERATED_DIR, the user's cache ($XDG_CACHE_HOME or ~/.cache, then
+penny_env/generated), the system's temporary folder. Never into the package's own folder: an installed package's
+folder belongs to pip (``pip uninstall`` would leave generated files behind), a checkout's to git. It is never rewritten with other content (its name changes with it), so its
 timestamp, which numba's cache index checks, stays put.
 """
 from __future__ import annotations
@@ -35,7 +35,7 @@ def generated_dir() -> Path:
         env = os.environ.get("PENNY_ENV_GENERATED_DIR")
         cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
         uid = os.getuid() if hasattr(os, "getuid") else 0
-        candidates = ([Path(env)] if env else []) + [Path(__file__).with_name("_generated"), cache / "penny_env" / "generated",
+        candidates = ([Path(env)] if env else []) + [cache / "penny_env" / "generated",
                                                      Path(tempfile.gettempdir()) / f"penny_env_generated_{uid}"]
         for folder in candidates:
             if _writable(folder):

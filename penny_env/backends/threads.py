@@ -23,7 +23,7 @@ What penny_env does (docs/contention.md measures the alternatives side by side):
 * a child forked after the parent launched numba's threads, on any layer, runs penny_env's loops serially
   (the same functions compiled without ``parallel``, bitwise the same results; :func:`locked`): GNU
   OpenMP cannot run there, and a child forked while another thread was inside a parallel step under
-  workqueue or TBB blocked for more than 20 s in 2 of 3 tries (issue 31). The child also gets a fresh
+  workqueue or TBB blocked for more than 20 s in 2 of 3 tries. The child also gets a fresh
   :data:`PARALLEL_LOCK` (:func:`_after_fork_in_child`): the parent's may be held, at the fork, by a thread
   the child does not have. Forked workers usually step one env each, so they lose little;
 * so do calls with fewer than :data:`SERIAL_BELOW` pennies, where waking the sleeping threads would cost

@@ -1,4 +1,4 @@
-"""Sizes an environment is built with, refused up front with the field's name (issue 31).
+"""Sizes an environment is built with, refused up front with the field's name.
 
 Integer fields end up in int64 arrays and in the packed constants of the compiled step (functional.pack):
 beyond INT64_MAX they failed later with an OverflowError naming no field. A vector env's arrays grow

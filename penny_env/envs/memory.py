@@ -1,5 +1,5 @@
 """How much memory this process may still allocate: the least of what the machine has free and what the limits set
-on this process allow (issue 40: under ``ulimit -v`` or a container's memory limit, MemAvailable alone said a
+on this process allow (under ``ulimit -v`` or a container's memory limit, MemAvailable alone said a
 PennyVectorEnv of 5e6 envs fits, and numpy's MemoryError came 137 s later).
 
 * the machine: MemAvailable of /proc/meminfo (Linux), else the free physical pages (os.sysconf);

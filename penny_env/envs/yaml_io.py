@@ -1,7 +1,7 @@
 """YAML reading with the numbers people write: PyYAML follows YAML 1.1, where ``1e-2`` (no dot) is a string,
 not a float, so ``control_dt: 1e-2`` in a scene file failed with "must be a number, got '1e-2'". The
 loader here is PyYAML's safe loader with YAML 1.2's float rule (``1e-2``, ``3E5``, ``.5``, ``-1.5e+3``); every
-other value reads as PyYAML reads it, with two refusals (issue 40): a key given twice in one mapping (PyYAML keeps
+other value reads as PyYAML reads it, with two refusals: a key given twice in one mapping (PyYAML keeps
 the last one silently: a second ``env_id`` won) and nesting deeper than MAX_DEPTH (100,000 levels were a bare
 RecursionError), both as yaml.YAMLError, which every caller reports as invalid YAML naming the file.
 :func:`read_text` reads a config file with errors that name it (a folder, a missing file, bytes that are not

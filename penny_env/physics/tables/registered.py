@@ -114,7 +114,7 @@ def check_registered(table) -> None:
         pass
 
 
-# -- at impacts: the formulas against the table's own h where the penny hits (issue 40, item 2) ----------------
+# -- at impacts: the formulas against the table's own h where the penny hits ----------------
 AUDIT_SAMPLE = 64     # impacts of one simulate() / batch call compared (evenly spaced over its impacts)
 AUDIT_FIRST = 256     # an environment compares every impact of its first AUDIT_FIRST...
 AUDIT_EVERY = 64      # ...then one impact in AUDIT_EVERY
