@@ -4,9 +4,10 @@ glue (builder.Builder.kernel), the law dispatch and the constants' unpacking (pa
 
 A generated module is named after what it holds and a hash of its source, and written once into the first
 writable folder of: $PENNY_ENV_GENERATED_DIR, the user's cache ($XDG_CACHE_HOME or ~/.cache, then
-penny_env/generated), the system's temporary folder. Never into the package's own folder: an installed package's
-folder belongs to pip (``pip uninstall`` would leave generated files behind), a checkout's to git. It is never rewritten with other content (its name changes with it), so its
-timestamp, which numba's cache index checks, stays put.
+penny_env/generated), the system's temporary folder. Never into the package's own folder: an installed
+package's folder belongs to pip (``pip uninstall`` would leave generated files behind), a checkout's to git. A
+module is never rewritten with other content (its name changes with it), so its timestamp, which numba's cache
+index checks, stays put.
 """
 from __future__ import annotations
 
