@@ -187,14 +187,22 @@ def main(argv=None) -> int:
     ap.add_argument("--ptxas", default=None, help="path of ptxas (default: found automatically)")
     ap.add_argument("--max-registers", type=int, default=None, help="numba-cuda's max_registers for the step kernel")
     ap.add_argument("--out", default=None, help="write the register table (markdown) here")
+    ap.add_argument("--quick", action="store_true", help="the open plane's small kernels (observe_rows, "
+                    "clear_work_count) at the first --cc only, for the tests; never writes into docs/")
     a = ap.parse_args(argv)
     ccs = [tuple(int(v) for v in c.split(".")) for c in a.cc]
     kinds = a.kinds if a.kinds is not None else [-1] + list(range(len(COMPILED_FORMULAS)))
+    if a.quick:
+        from pathlib import Path
+        if a.out and (Path(__file__).resolve().parents[1] / "docs") in Path(a.out).resolve().parents:
+            ap.error("--quick never writes into docs/: give --out a path outside it")
+        ccs, kinds = ccs[:1], [-1]
+    names = {"observe_rows", "clear_work_count"} if a.quick else None
     ptxas = a.ptxas or find_ptxas()
     rows = []
     for cc in ccs:
         for kind in kinds:
-            out = compile_kernels(kind, cc, stand_in=True, max_registers=a.max_registers)
+            out = compile_kernels(kind, cc, stand_in=True, names=names, max_registers=a.max_registers)
             print(f"sm_{cc[0]}{cc[1]} {variant_name(kind):40s} laws compiled: {out.pop('laws')}")
             for name, (ptx, sec) in out.items():
                 line = f"sm_{cc[0]}{cc[1]} {variant_name(kind):40s} {name:20s} {len(ptx):8d} chars PTX  {sec:6.2f} s"

@@ -4,6 +4,9 @@ import re
 import logging
 
 import pytest
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
 
 numba = pytest.importorskip("numba")
 
@@ -97,3 +100,18 @@ def test_a_build_says_it_is_still_at_it_and_how_long_it_took(caplog, monkeypatch
     assert "it is not hung" in watch.lines[0]
     assert re.match(r"penny_env: compiled the watched vector env step for table Shape in [0-9.]+ s$", watch.lines[-1])
     assert sum(line.startswith("penny_env: compiled ") for line in lines) == 1  # (the failed build says nothing more)
+
+
+def test_cuda_kernels_quick_compiles_the_planes_kernels_and_refuses_docs(tmp_path, capsys):
+    """`python -m devtools.cuda_kernels --quick` (the README says every command takes --quick): two small kernels of
+    the open plane at one compute capability, registers from ptxas where it is installed, and never into docs/."""
+    pytest.importorskip("numba_cuda")
+    from devtools import cuda_kernels
+    out = tmp_path / "kernels.md"
+    assert cuda_kernels.main(["--quick", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "plane" in printed and "observe_rows" in printed and "ellipse" not in printed
+    if cuda_kernels.find_ptxas():
+        assert "| sm_90 | plane | observe_rows |" in out.read_text()
+    with pytest.raises(SystemExit):
+        cuda_kernels.main(["--quick", "--out", str(ROOT / "docs" / "cuda_kernels.md")])
