@@ -209,14 +209,20 @@ def _targets(single_rows, pend_us: float, big) -> list[str]:
     return out
 
 
+def readme_summary(lines: list[str]) -> list[str]:
+    """The README's short throughput block from a report's lines: its machine, date and command, and the targets
+    (the tables themselves stay in docs/throughput.md)."""
+    head = [ln for ln in lines if ln.startswith(("- machine:", "- date:", "- command:", "- load when"))]
+    targets = lines[lines.index("## Targets, from the numbers above") + 2:]
+    return head + ["", "Targets met or not, from the tables of [docs/throughput.md](docs/throughput.md):", ""] + targets
+
+
 def update_readme(path: str, lines: list[str]) -> None:
-    """Put the report's tables (and its machine, date and command lines) between the README's markers."""
+    """Put the report's summary (readme_summary) between the README's markers."""
     from studies.common import replace_block
     start, end = "<!-- throughput:start -->", "<!-- throughput:end -->"
-    body = [ln.replace("## ", "#### ", 1) if ln.startswith("## ") else ln for ln in lines[2:]]
-    if not replace_block(path, start, end, "\n".join(body)):
+    if not replace_block(path, start, end, "\n".join(readme_summary(lines)).rstrip()):
         raise ValueError(f"{path}: no {start} ... {end} block to replace")
-
 
 if __name__ == "__main__":
     main()

@@ -234,13 +234,14 @@ def readme_sentence(part: str, result: dict | None, readme: str) -> str:
     retries = sum(r.get("pip_retries", 0) for r in install)
     hosts = sorted({re.sub(r"^https?://([^/]+).*", r"\1", a) for r in install if r.get("pip_retries")
                     for a in shlex.split(r["step"]) if a.startswith("http")})
-    retry = (f"; {retries} connection retries to {', '.join(hosts) or 'an index'}, which this machine cannot reach, "
-             "before pip took its local wheels" if retries else "")
+    retry = (f"; the measuring machine could not reach {', '.join(hosts) or 'an index'} and pip took local wheels "
+             f"after {retries} connection retries" if retries else "")
     install_text = (f"{_duration(sum(r['seconds'] for r in install))} to install (a {size:.2f} GiB virtual "
-                    f"environment, wheels from this machine's cache and package indexes{retry})")
+                    f"environment{retry})")
     where = (f"measured by `python -m studies.measure_readme` ([docs/readme_costs.md](docs/readme_costs.md)) on "
-             f"{_machine(result)}, {result.get('date', '?')}, load average {mean:.1f} on average (at most {peak:.1f}; "
-             "a load above the core count means other jobs competed for the cores)")
+             f"{_machine(result)}, {result.get('date', '?')}, load average {mean:.1f} on average (at most {peak:.1f}). "
+             "On your machine: about this on 2 free cores, less with more; several times longer on a busy machine, "
+             "where the first compile of each table shape takes minutes")
     if part == "tests":
         suite = next(r for r in run if r["step"].startswith("python -m pytest"))
         counts = ", ".join(f"{n} {k}" for k, n in (suite.get("pytest") or {}).items())
