@@ -12,7 +12,7 @@ import weakref
 
 from ..physics.law_checks import ARGUMENTS, try_law
 from ..physics.tables.base import N_CONSTANTS
-from ..physics.tables.registered import check_formulas_on_grid
+from ..physics.tables.registered import check_formulas_on_grid, once
 
 _COMPILED_FORMULAS = weakref.WeakKeyDictionary()  # table class -> (terms, hess) as numba compiles them
 _CHECKED_TABLES = weakref.WeakKeyDictionary()     # table -> True: its compiled formulas were compared on the grid
@@ -73,13 +73,4 @@ def check_compiled_formulas(table) -> None:
     compiled = _COMPILED_FORMULAS.get(type(table))
     if compiled is None:
         return
-    try:
-        if _CHECKED_TABLES.get(table):
-            return
-    except TypeError:  # an unhashable table: checked every time
-        pass
-    check_formulas_on_grid(table, compiled[0], compiled[1], " (compiled by numba)")
-    try:
-        _CHECKED_TABLES[table] = True
-    except TypeError:
-        pass
+    once(_CHECKED_TABLES, table, lambda t: check_formulas_on_grid(t, compiled[0], compiled[1], " (compiled by numba)"))

@@ -91,15 +91,28 @@ def check_registered(table) -> None:
     registered class from outside penny_env with formulas (penny_env's own shapes are tested in the suite),
     once per distinct table."""
     from .base import compiled_kind
-    from .convex import check_on_grid
     cls = type(table)
     if table is None or cls.terms is None or compiled_kind(cls) < 0 or cls.__module__.startswith("penny_env."):
         return
+    once(_CHECKED, table, _check_instance)
+
+
+def once(checked, table, check) -> None:
+    """``check(table)`` once per distinct table (``checked``: a WeakKeyDictionary of the tables done; tables hash by
+    value; an unhashable table is checked every time)."""
     try:
-        if _CHECKED.get(table):
+        if checked.get(table):
             return
-    except TypeError:  # an unhashable table: checked every time
-        pass
+    except TypeError:
+        check(table)
+        return
+    check(table)
+    checked[table] = True
+
+
+def _check_instance(table) -> None:
+    from .convex import check_on_grid
+    cls = type(table)
     owner = owner_of(table)
     xmin, xmax, ymin, ymax = (float(v) for v in table.extent)
     check_formulas_on_grid(table, cls.terms, cls.hess, "")
@@ -108,10 +121,6 @@ def check_registered(table) -> None:
                   inradius=float(table.inradius), hessian=hessian if callable(hessian) else None, edge_may_touch=True)
     if not math.isfinite(float(getattr(table, "third_derivative_bound", 0.0))):
         raise ValueError(f"{owner}.third_derivative_bound must be finite")
-    try:
-        _CHECKED[table] = True
-    except TypeError:
-        pass
 
 
 # -- at impacts: the formulas against the table's own h where the penny hits ----------------
