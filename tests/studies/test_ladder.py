@@ -1,0 +1,102 @@
+"""The agent ladder (studies/ladder.py): its config is checked before any job runs, its evaluations are log-spaced,
+the report's intervals are honest at 0, a single-input success without an impact (or any success on the plane)
+stops the report, and --quick runs end to end outside docs/ and the README."""
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("scipy")
+from studies import ladder  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_checkpoints_are_half_decades_up_to_the_budget():
+    assert ladder.checkpoints(100_000, 20_000_000) == [100_000, 316_228, 1_000_000, 3_162_278, 10_000_000, 20_000_000]
+    assert ladder.checkpoints(1000, 1000) == [1000]
+
+
+def _config(tmp_path, **changes):
+    cfg = {"eval_seeds": 4, "seeds": [0], "first_checkpoint": 1000, "demos": {"pairs": 1},
+           "cells": [["Steer", "stadium", "elastic"]],
+           "agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Steer"],
+                              "budget": {"Steer": 2000}}}}
+    cfg.update(changes)
+    path = tmp_path / "ladder.yaml"
+    import yaml
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"cells": [["Sideways", "stadium", "elastic"]]}, "a cell is"),
+    ({"cells": [["Steer", "stadium", "0.7"]]}, "0.7"),
+    ({"agents": {"x": {"module": "training.train", "privileged": False, "probes": ["Steer"], "budget": {"Steer": 1}}}},
+     "does not follow training/protocol.py"),
+    ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Steer"],
+                         "budget": {"Steer": 10}, "args": {"no_such_field": 1}}}}, "no_such_field"),
+    ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Drive"],
+                         "budget": {"Steer": 10}}}}, "no budget for probe Drive"),
+    ({"seeds": []}, "seeds"),
+])
+def test_a_bad_config_is_refused_naming_the_field(tmp_path, changes, message):
+    with pytest.raises((ValueError, KeyError), match=message):
+        ladder.load_config(_config(tmp_path, **changes))
+
+
+def _result(agent, cell, seed, impacts):
+    return {"job": {"agent": agent, "cell": list(cell), "seed": seed}, "cpu_seconds": 1.0,
+            "checkpoints": [{"env_steps": 1000, "successes": sum(k >= 0 for k in impacts), "episodes": len(impacts),
+                             "impacts_to_success": impacts}]}
+
+
+def test_the_summary_is_honest_at_zero_and_flags_impact_free_single_input_successes():
+    cfg = {"eval_seeds": 4, "cells": [("Steer", "stadium", "elastic"), ("Steer", "plane", "-")],
+           "agents": {"a": {"privileged": False}, "b": {"privileged": True}}}
+    results = {("a", ("Steer", "stadium", "elastic")): [_result("a", ("Steer", "stadium", "elastic"), s, [-1] * 4)
+                                                         for s in (0, 1)],
+               ("b", ("Steer", "stadium", "elastic")): [_result("b", ("Steer", "stadium", "elastic"), 0, [2, 1, -1, 3])]}
+    summary = ladder.summarize(cfg, results)
+    zero = next(s for s in summary if s["agent"] == "a")
+    assert zero["success"] == 0 and zero["ci"][0] == 0 and zero["ci"][1] > 0.3  # (8 episodes: an exact bound, not 0)
+    some = next(s for s in summary if s["agent"] == "b")
+    assert some["impacts_per_success"] == pytest.approx(2.0) and some["without_impact"] == 0
+    ladder.check_theorems(summary)  # nothing to flag
+    results[("b", ("Steer", "stadium", "elastic"))] = [_result("b", ("Steer", "stadium", "elastic"), 0, [0, -1, -1, -1])]
+    with pytest.raises(RuntimeError, match="without an impact"):
+        ladder.check_theorems(ladder.summarize(cfg, results))
+    results[("a", ("Steer", "plane", "-"))] = [_result("a", ("Steer", "plane", "-"), 0, [1, -1, -1, -1])]
+    del results[("b", ("Steer", "stadium", "elastic"))]
+    with pytest.raises(RuntimeError, match="on the plane"):
+        ladder.check_theorems(ladder.summarize(cfg, results))
+
+
+def test_the_witnessed_rate_comes_from_the_witness_studys_pairs():
+    w = ladder.witnessed_by_seed(("Steer", "ellipse", "elastic"), 200)
+    with open(ROOT / "docs" / "witnesses.csv") as f:
+        row = next(r for r in csv.DictReader(f) if (r["probe"], r["table"], r["law"]) == ("Steer", "ellipse", "elastic"))
+    assert int(w.sum()) == int(row["witnessed"]) and len(w) == int(row["pairs"])
+
+
+@pytest.mark.slow
+def test_quick_run_writes_its_report_outside_docs(reports_untouched):
+    out = ladder.main(["--quick", "--workers", "1", "--runs", str(reports_untouched / "runs")])
+    text = Path(out).read_text()
+    assert "## Goals" in text and "### Steer-stadium-elastic" in text and "### Steer-plane--" in text
+    rows = list(csv.DictReader(open(Path(out).with_suffix(".csv"))))
+    assert {r["seed"] for r in rows} == {"0", "1"} and {r["probe"] for r in rows} == {"Steer"}
+    assert set(rows[0]) == set(ladder.CSV_FIELDS)
+    budgets = sorted({int(r["env_steps"]) for r in rows})
+    assert budgets[0] >= 1000 and all(0 <= int(r["successes"]) <= int(r["episodes"]) == 8 for r in rows)
+    plane = [r for r in rows if r["table"] == "plane"]
+    assert plane and all(r["successes"] == "0" for r in plane)
+    # resumable: a second run finds every job finished and only rewrites the report
+    result = next((reports_untouched / "runs").rglob("result.json"))
+    stamp = result.stat().st_mtime_ns
+    ladder.main(["--quick", "--workers", "1", "--runs", str(reports_untouched / "runs")])
+    assert result.stat().st_mtime_ns == stamp and json.loads(result.read_text())["checkpoints"]
+    assert np.isfinite(float(rows[-1]["successes"]))
