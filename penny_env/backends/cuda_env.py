@@ -232,7 +232,7 @@ class DeviceStep:
         return StepOutputs(out, buf.count, buf.time.T, buf.end.T)
 
     def mask(self):
-        """The info masks: numpy arrays (outputs "numpy"), else one constant device array shared by every key."""
+        """The info masks: new numpy arrays (outputs "numpy"), else one constant device array shared by every key."""
         return np.ones(self.n, dtype=bool) if self.outputs == "numpy" else self.masks
 
     # -- reset ---------------------------------------------------------------------------------------

@@ -87,6 +87,7 @@ class CpuRunner:
         self.same_step = p.autoreset == SAME_STEP
         self.st = new_state(n)
         self.actions = np.zeros((n, n_act))
+        self.mask = np.ones(n, dtype=bool).copy  # (an info mask: a new array each call, a copy costs a third of np.ones)
         serial = getattr(fns.step_envs, "serial", None)
         # fewer envs than threads.SERIAL_BELOW: the serial loop, called directly (threads.locked)
         self.step_envs = serial() if serial is not None and n < threads.SERIAL_BELOW else fns.step_envs
@@ -124,12 +125,13 @@ class CpuRunner:
     def step(self) -> StepOutputs:
         out, buf, times, ends = self.buffers()
         self.step_envs(tuple(self.st), self.actions, self.consts, out, buf)
+        # (the records made with tuple.__new__: the NamedTuples' own constructors cost a few per cent of a step at N = 1)
         if self.audit is not None:  # a user's registered shape: its formulas against its own h at a sample of impacts
             counts, post = buf[0], buf[3]
             for i in np.flatnonzero(counts):
                 k = min(int(counts[i]), self.K)
                 self.audit.check(post[:k, :, i], ends[i, :k], f"PennyVectorEnv.step, env {i}")
-        return StepOutputs(StepResults(*out), buf[0], times, ends)
+        return tuple.__new__(StepOutputs, (tuple.__new__(StepResults, out), buf[0], times, ends))
 
     def reset(self, keys, episodes, rows, states=None, targets=None):
         """Episodes drawn for ``rows`` (their keys and episode counters given for every env), reset options' states
@@ -169,8 +171,6 @@ class CpuRunner:
                 self.fns.reset_rows(np.arange(rows), st, self.consts, obs)
                 self.fns.observe_rows(np.arange(rows), st, self.consts, obs)
 
-    def mask(self):
-        return np.ones(self.n, dtype=bool)
 
     def host(self, name):
         return getattr(self.st, name)
