@@ -126,6 +126,9 @@ REPORTS = {
                               ("training/ppo_torch.py", "studies/ppo_torch_report.py", "configs/train/ppo_torch_gpu.yaml") + _CUDA
                               + _ENV + _PHYSICS
                               + _TABLES),
+    "docs/ppo_speed.md": ("python -m devtools.ppo_speed --out docs/ppo_speed.md",
+                          ("devtools/ppo_speed.py", "training/ppo_torch.py", "studies/fair_pure_rl.py",
+                           "penny_env/sb3.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
@@ -156,7 +159,8 @@ MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "devtools.compile_time": "docs/compile_time.md",
                   "studies.ppo_compare": "docs/ppo_torch.md",
                   "devtools.throughput_gpu": "docs/throughput_gpu.md",
-                  "studies.ppo_torch_report": "docs/ppo_torch_gpu.md"}
+                  "studies.ppo_torch_report": "docs/ppo_torch_gpu.md",
+                  "devtools.ppo_speed": "docs/ppo_speed.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")

@@ -99,7 +99,7 @@ class Args:
     max_grad_norm: float = 0.5
     reward_scale: float = 0.1  # (fair reward + shaping) x this: returns of order 1
     hidden: int = 64
-    std_init: float = 1.0  # initial action noise (heading: rad; speed: units of V_MAX)
+    std_init: float = 0.5  # initial action noise (heading: rad; speed: units of V_MAX)
     std_min: float = 0.05  # noise floor and ceiling (the log-std is clamped)
     std_max: float = 2.0
     norm_coef: float = 0.1  # pulls the heading 2-vector's length to 1 (its angle's gradient stays bounded)

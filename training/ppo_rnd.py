@@ -277,7 +277,8 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
             r_int = rnd.error(whiten(NO.reshape(-1, obs_dim))).reshape(T, N) * VALID
             for t in range(T):
                 int_filter = int_filter * args.gamma_int + r_int[t]
-                ret_rms.update(int_filter[VALID[t].bool()])
+                if VALID[t].any():
+                    ret_rms.update(int_filter[VALID[t].bool()])
             RI.copy_(r_int / ret_rms.var.sqrt().clamp(min=1e-8))
             obs_rms.update(NO.reshape(-1, obs_dim)[VALID.reshape(-1).bool()])
             nv = agent.critic(obs)
@@ -305,6 +306,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
                 v = agent.critic(bo[mb])
                 vl = ((v[:, 0] - bret_e[mb]) ** 2).mean() + ((v[:, 1] - bret_i[mb]) ** 2).mean()
                 sub = mb[torch.rand(len(mb)) < args.update_proportion]
+                sub = sub if len(sub) else mb[:1]
                 fwd = rnd.error(bno[sub]).mean()
                 loss = pg + args.vf_coef * vl - args.ent_coef * d.entropy().sum(-1).mean() + fwd
                 opt.zero_grad()

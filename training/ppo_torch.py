@@ -16,6 +16,21 @@ The hyperparameters default to those of configs/train/ppo_reach_ellipse.yaml and
 coefficient 0.5, gradient norm 0.5, advantages normalised per minibatch, separate 64-64 tanh MLPs for the
 actor mean and the critic with orthogonal initialisation, and a state-independent log-std starting at 0.
 
+**The ladder's configuration** (issue 36; ``ladder_args()``, ``--ladder``): the fast configuration on a CPU
+(``FAST_CPU``, ``--fast``: 4096 envs x 32 steps, 2 epochs of minibatches of 16384: 16 gradient steps per rollout
+of 131,072 transitions; the update's cost is samples x epochs, so this halves the 4-epoch setting's), gamma 0.999,
+the fair reward of studies/fair_pure_rl.py (``fair_reward``: the success bonus only, on top of env_kwargs, in the
+training env) and training envs seeded from ``env_seed_base`` = 1e7 (never the evaluation's pair seeds).
+``devtools/ppo_speed.py`` measures it end to end beside SB3's PPO. torch.compile of the loss was measured on this
+CPU (one thread, minibatch 16384, 64-64 MLPs, 2026-11-27, load ~6): 119 ms per gradient step against 110 ms eager
+(and 131 ms under bf16 autocast), so it is not used.
+
+**The protocol** (training/protocol.py, the ladder's): :func:`train` takes ``(args, checkpoints, on_checkpoint,
+log)``, calls ``on_checkpoint(env_steps, TorchPolicy)`` the first time the env-step count reaches each
+checkpoint and at the end, and returns a dict (``env_steps``, ``wall_time_s``, ``steps_per_s``, ``policy``);
+:class:`TorchPolicy` is the deterministic policy (the actor's mean, clipped). :func:`train_agent` is the
+command's entry (returns ``(agent, results)``, with this module's own final evaluation).
+
 Env fields: a config's ``env_kwargs`` and ``--set FIELD=VALUE`` (YAML values, e.g. ``--set law=plastic
 "table={kind: circle, radius: 0.12}" progress_weight=0``) override any scene or task field of the id, as
 ``gymnasium.make(id, **kwargs)`` does; the evaluation uses the same fields.
