@@ -8,7 +8,7 @@ env id, the same num_envs and seed) with the config's hyperparameters, for the s
 one after the other in this process with one torch thread: SB3 through penny_env/sb3.py as training.train
 and training.runner build it (runner.make_train_env, runner.algo_class: a VecMonitor over PennySB3VecEnv),
 without runner's periodic evaluations and checkpoints so that the wall time is training alone; the torch
-PPO through training.ppo_torch.train. After every update each records (env steps, wall seconds since the
+PPO through training.ppo_torch.train_agent. After every update each records (env steps, wall seconds since the
 start of training, success rate over its last 100 finished training episodes, their mean return). The
 trained policies are then evaluated with deterministic actions on the same held-out seeds
 (training.episodes.run_episodes; seeds from training.runner.eval_seed(seed)).
@@ -116,7 +116,7 @@ def run_torch(cfg: dict, total: int, run_dir: Path, device: str, quick: bool, lo
 
     args = ppo_torch.args_from_config(cfg, total_timesteps=total, device=device, out=str(run_dir))
     rows = []
-    agent, res = ppo_torch.train(args, log=log, on_update=lambda r: rows.append(
+    agent, res = ppo_torch.train_agent(args, log=log, on_update=lambda r: rows.append(
         (r["global_step"], r["wall_time_s"], r["success_rate"], r["mean_return"], min(r["episodes"], args.success_window))))
     agent = agent.cpu()
 

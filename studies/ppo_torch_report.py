@@ -51,7 +51,7 @@ def main(argv=None):
     args = ppo_torch.parse_args(argv, ap)
     if args.quick and Path(ap.last.report).resolve().is_relative_to(ROOT / "docs"):
         ap.error("--quick never writes into docs/: give --report a path outside it")
-    agent, results = ppo_torch.train(args)
+    agent, results = ppo_torch.train_agent(args)
     write_report(ap.last.report, argv, results)
     return agent, results
 

@@ -132,6 +132,9 @@ REPORTS = {
                         "training/ppo_torch.py", "training/ppo_heading.py", "training/ppo_rnd.py", "training/her_sac.py",
                         "training/start_curriculum.py", "training/go_explore.py", "penny_env/envs/vector_env.py")
                        + _ENV + _PHYSICS + _TABLES),
+    "docs/ppo_speed.md": ("python -m devtools.ppo_speed --out docs/ppo_speed.md",
+                          ("devtools/ppo_speed.py", "training/ppo_torch.py", "studies/fair_pure_rl.py",
+                           "penny_env/sb3.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
     "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
@@ -163,7 +166,8 @@ MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "studies.ppo_compare": "docs/ppo_torch.md",
                   "devtools.throughput_gpu": "docs/throughput_gpu.md",
                   "studies.ppo_torch_report": "docs/ppo_torch_gpu.md",
-                  "studies.ladder": "docs/ladder.md"}
+                  "studies.ladder": "docs/ladder.md",
+                  "devtools.ppo_speed": "docs/ppo_speed.md"}
 
 PREFIX = "- sources: sha256 "
 _LINE = re.compile(r"^- sources: sha256 ([0-9a-f]{16})\b")

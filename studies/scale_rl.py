@@ -78,7 +78,7 @@ def ppo_args(cell, seed: int, a, out: Path):
 def run(a, log=print, after_each=None) -> list[dict]:
     """Train every cell and seed; rows of CSV_COLUMNS (one per cell, seed and evaluation point). after_each(rows)
     is called after each run (the report so far: a run cut short by a time limit keeps the cells done)."""
-    from training.ppo_torch import check_args, train
+    from training.ppo_torch import check_args, train_agent
     rows = []
     for text in a.cells:
         cell = parse_cell(text)
@@ -86,7 +86,7 @@ def run(a, log=print, after_each=None) -> list[dict]:
             args = ppo_args(cell, seed, a, a.runs)
             check_args(args)
             t0 = time.perf_counter()
-            _, res = train(args, log=log if a.verbose else None)
+            _, res = train_agent(args, log=log if a.verbose else None)
             log(f"[scale_rl] {text} seed {seed}: {res['timesteps']:,} steps in {res['train_seconds']:.0f} s "
                 f"({res['steps_per_s']:,.0f} steps/s on {res['device']}), final success "
                 f"{res['curve'][-1]['success_rate'] if res['curve'] else float('nan'):.3f} "

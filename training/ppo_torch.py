@@ -16,6 +16,21 @@ The hyperparameters default to those of configs/train/ppo_reach_ellipse.yaml and
 coefficient 0.5, gradient norm 0.5, advantages normalised per minibatch, separate 64-64 tanh MLPs for the
 actor mean and the critic with orthogonal initialisation, and a state-independent log-std starting at 0.
 
+**The ladder's configuration** (issue 36; ``ladder_args()``, ``--ladder``): the fast configuration on a CPU
+(``FAST_CPU``, ``--fast``: 4096 envs x 32 steps, 2 epochs of minibatches of 16384: 16 gradient steps per rollout
+of 131,072 transitions; the update's cost is samples x epochs, so this halves the 4-epoch setting's), gamma 0.999,
+the fair reward of studies/fair_pure_rl.py (``fair_reward``: the success bonus only, on top of env_kwargs, in the
+training env) and training envs seeded from ``env_seed_base`` = 1e7 (never the evaluation's pair seeds).
+``devtools/ppo_speed.py`` measures it end to end beside SB3's PPO. torch.compile of the loss was measured on this
+CPU (one thread, minibatch 16384, 64-64 MLPs, 2026-11-27, load ~6): 119 ms per gradient step against 110 ms eager
+(and 131 ms under bf16 autocast), so it is not used.
+
+**The protocol** (training/protocol.py, the ladder's): :func:`train` takes ``(args, checkpoints, on_checkpoint,
+log)``, calls ``on_checkpoint(env_steps, TorchPolicy)`` the first time the env-step count reaches each
+checkpoint and at the end, and returns a dict (``env_steps``, ``wall_time_s``, ``steps_per_s``, ``policy``);
+:class:`TorchPolicy` is the deterministic policy (the actor's mean, clipped). :func:`train_agent` is the
+command's entry (returns ``(agent, results)``, with this module's own final evaluation).
+
 Env fields: a config's ``env_kwargs`` and ``--set FIELD=VALUE`` (YAML values, e.g. ``--set law=plastic
 "table={kind: circle, radius: 0.12}" progress_weight=0``) override any scene or task field of the id, as
 ``gymnasium.make(id, **kwargs)`` does; the evaluation uses the same fields.
@@ -95,12 +110,28 @@ class Args:
     torch_threads: int = 1
     quick: bool = False
     out: str | None = None
+    fair_reward: bool = False  # train on FAIR_REWARD (the success bonus only), on top of env_kwargs
+    env_seed_base: int | None = None  # training envs reset with seed env_seed_base + 100_000 seed (None: seed)
+
+
+# the fair reward of studies/fair_pure_rl.py (REWARD): the success bonus only
+FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "success_bonus": 10.0}
+# the fast configuration on a CPU: few, large minibatches over many envs (the update's cost is samples x epochs)
+FAST_CPU = {"num_envs": 4096, "num_steps": 32, "minibatch_size": 16384, "update_epochs": 2, "device": "cpu"}
+# the ladder's plain PPO ("ppo"): the fast configuration, gamma 0.999, the fair reward, training seeds >= 1e7
+LADDER = {**FAST_CPU, "gamma": 0.999, "gae_lambda": 0.95, "fair_reward": True, "env_seed_base": 10_000_000}
+
+
+def ladder_args(**changes) -> Args:
+    """The ladder's configuration (LADDER) with ``changes`` (env_id, env_kwargs, seed, total_timesteps, ...)."""
+    return dataclasses.replace(Args(), **{**LADDER, **changes})
 
 
 def quick_args(args: Args) -> Args:
     """--quick: a few thousand steps, seconds on a CPU (checks the pipeline, learns little)."""
     return dataclasses.replace(args, total_timesteps=min(args.total_timesteps, 4096), num_steps=32,
-                               minibatch_size=256, update_epochs=2, eval_episodes=min(args.eval_episodes, 8))
+                               num_envs=min(args.num_envs, 64), minibatch_size=256, update_epochs=2,
+                               eval_episodes=min(args.eval_episodes, 8))
 
 
 def args_from_config(cfg: dict, **changes) -> Args:
@@ -190,10 +221,20 @@ def env_actions(actions: torch.Tensor, on_torch: bool):
     return actions if on_torch else actions.detach().cpu().numpy()
 
 
+def reward_kwargs(args: Args) -> dict:
+    """FAIR_REWARD's fields that the env's task has (fair_reward), else none."""
+    if not args.fair_reward:
+        return {}
+    from penny_env.envs.scene import env_presets, resolve
+    spec = dict(env_presets()[args.env_id])
+    _, task = resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **args.env_kwargs})
+    return {k: v for k, v in FAIR_REWARD.items() if hasattr(task, k)}
+
+
 def make_env(args: Args, num_envs: int | None = None):
     import gymnasium as gym
     import penny_env  # noqa: F401
-    kwargs = dict(args.env_kwargs)
+    kwargs = {**args.env_kwargs, **reward_kwargs(args)}
     if args.env_backend is not None:
         kwargs["backend"] = args.env_backend
     return gym.make_vec(args.env_id, num_envs=num_envs or args.num_envs, vectorization_mode="vector_entry_point",
@@ -307,17 +348,50 @@ def default_out(args: Args) -> Path:
     return Path("runs") / "ppo_torch" / f"{args.env_id}_{args.seed}"
 
 
-def train(args: Args, env=None, log=print, on_update=None):
+class TorchPolicy:
+    """The deterministic policy of training/protocol.py: the actor's mean, clipped to the action box (a frozen
+    copy on the CPU; stateless)."""
+
+    def __init__(self, agent: Agent):
+        import copy
+        self.actor = copy.deepcopy(agent.actor_mean).cpu().eval()
+
+    def reset(self, num_envs: int) -> None:
+        pass
+
+    @torch.no_grad()
+    def __call__(self, obs, info) -> np.ndarray:
+        x = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
+        return self.actor(x).clamp(-1.0, 1.0).numpy().astype(np.float64)
+
+
+def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
+    """training/protocol.py's entry: train for args.total_timesteps env steps (the ladder's configuration is
+    :func:`ladder_args`); calls on_checkpoint(env_steps, TorchPolicy) the first time the env-step count reaches
+    each of ``checkpoints`` and at the end. Writes into args.out (None: a new temporary directory); no final
+    evaluation of its own. Returns the results dict with ``env_steps``, ``wall_time_s``, ``steps_per_s`` and
+    ``policy`` (the final TorchPolicy)."""
+    if args.out is None:
+        args = dataclasses.replace(args, out=tempfile.mkdtemp(prefix="penny_env-ppo-"))
+    agent, res = train_agent(args, log=log, checkpoints=checkpoints, on_checkpoint=on_checkpoint, final_eval=False)
+    return {**res, "env_steps": res["timesteps"], "wall_time_s": res["train_seconds"], "policy": TorchPolicy(agent)}
+
+
+def train_agent(args: Args, env=None, log=print, on_update=None, checkpoints=(), on_checkpoint=None,
+                final_eval=True):
     """Train into args.out (see the module docstring); returns (agent, results dict).
-    env: a vector env to use instead of make_env(args) (tests); on_update(row): called after each update.
+    env: a vector env to use instead of make_env(args) (tests); on_update(row): called after each update;
+    on_checkpoint(env_steps, TorchPolicy): see :func:`train`; final_eval: the deterministic evaluation on
+    eval_episodes held-out seeds at the end (results["eval"]).
     The folder's lock is held meanwhile (training.run_folder.run_lock): a second run into it is refused at once."""
     from training.run_folder import run_lock
     out = default_out(args).resolve()
     with run_lock(out):
-        return _train(dataclasses.replace(args, out=str(out)), env, log, on_update)
+        return _train(dataclasses.replace(args, out=str(out)), env, log, on_update, checkpoints, on_checkpoint,
+                      final_eval)
 
 
-def _train(args: Args, env=None, log=print, on_update=None):
+def _train(args: Args, env=None, log=print, on_update=None, checkpoints=(), on_checkpoint=None, final_eval=True):
     if args.quick:
         args = quick_args(args)
     made_env = env is None
@@ -352,7 +426,7 @@ def _train(args: Args, env=None, log=print, on_update=None):
     episodes = 0
 
     t0 = time.perf_counter()
-    first_obs, _ = env.reset(seed=args.seed)
+    first_obs, _ = env.reset(seed=args.seed if args.env_seed_base is None else args.env_seed_base + 100_000 * args.seed)
     cur_obs = to_tensor(first_obs, device).clone()  # the observation the next step acts on (updated in place)
     autoreset = torch.zeros(N, device=device)  # 1 where the env resets at the next step (NEXT_STEP mode)
     ep_ret = torch.zeros(N, device=device)
@@ -391,6 +465,7 @@ def _train(args: Args, env=None, log=print, on_update=None):
                          "(--env-backend cuda)")
     graph = None
     global_step, iterations = 0, max(1, -(-args.total_timesteps // (N * T)))
+    pending, called_at = sorted(int(c) for c in checkpoints), set()  # checkpoints to come; steps called at
     eval_at = curve_steps(iterations * N * T, args.curve_points, N * T)
     curve = []
     update_time = rollout_time = 0.0  # host seconds in the updates (GAE included) and in the rollouts
@@ -459,6 +534,14 @@ def _train(args: Args, env=None, log=print, on_update=None):
             ev = evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device)
             curve.append({"global_step": global_step, "wall_time_s": wall, **ev})
             t0 += time.perf_counter() - t_eval  # (evaluations are not training time)
+        if checkpoints or on_checkpoint is not None:
+            t_ck = time.perf_counter()
+            while pending and global_step >= pending[0]:
+                pending.pop(0)
+                if on_checkpoint is not None and global_step not in called_at:
+                    called_at.add(global_step)
+                    on_checkpoint(global_step, TorchPolicy(agent))
+            t0 += time.perf_counter() - t_ck  # (the caller's evaluations are not training time)
         if on_update is not None:
             on_update(row)
         if log is not None and (iteration % 10 == 0 or iteration == iterations):
@@ -467,6 +550,8 @@ def _train(args: Args, env=None, log=print, on_update=None):
                 f"return {row['mean_return']:.2f}, {wall:.0f} s")
     f.close()
     train_seconds = time.perf_counter() - t0
+    if on_checkpoint is not None and global_step not in called_at:
+        on_checkpoint(global_step, TorchPolicy(agent))
     env.close()
     torch.save(agent.state_dict(), out / "model.pt")
     writer.close()
@@ -478,7 +563,8 @@ def _train(args: Args, env=None, log=print, on_update=None):
                "rollout_seconds": rollout_time, "update_seconds": update_time, "curve": curve,
                "train_success_rate": row["success_rate"], "train_mean_return": row["mean_return"]}
     # a stand-in env passed by a caller (tests) has no registered id to evaluate on
-    results["eval"] = evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device) if made_env else None
+    results["eval"] = (evaluate(agent, args, args.eval_episodes, eval_seed(args.seed), device)
+                       if made_env and final_eval else None)
     (out / "results.json").write_text(json.dumps(results, indent=2))
     if log is not None:
         ev = results.get("eval")
@@ -537,6 +623,10 @@ def parse_args(argv=None, ap=None) -> Args:
     d = Args()
     ap.add_argument("--config", default=None, help="a training config (YAML, e.g. configs/train/ppo_reach_ellipse.yaml) "
                                                    "whose env, budget and SB3 PPO hyperparameters to use")
+    ap.add_argument("--ladder", action="store_true", help="the ladder's configuration (LADDER: 4096 envs x 32 steps, "
+                    "minibatches of 16384, 2 epochs, gamma 0.999, the fair reward, training seeds from 1e7)")
+    ap.add_argument("--fast", action="store_true", help="the fast CPU configuration (FAST_CPU) without the ladder's "
+                    "reward and discount")
     ap.add_argument("--env-id", default=None, help=f"a registered penny_env id (default {d.env_id})")
     ap.add_argument("--num-envs", type=int, default=None, help=f"envs of the vector env (default {d.num_envs})")
     ap.add_argument("--total-timesteps", type=int, default=None, help=f"env steps (default {d.total_timesteps:,})")
@@ -561,6 +651,8 @@ def parse_args(argv=None, ap=None) -> Args:
             args = args_from_config(load_config(a.config))
         else:
             args = Args()
+        if a.ladder or a.fast:
+            args = dataclasses.replace(args, **(LADDER if a.ladder else FAST_CPU))
         changes = {"env_id": a.env_id, "num_envs": a.num_envs, "total_timesteps": a.total_timesteps, "seed": a.seed,
                    "num_steps": a.num_steps, "eval_episodes": a.eval_episodes, "curve_points": a.curve_points,
                    "cuda_graph": None if a.cuda_graph is None else a.cuda_graph == "on"}
@@ -598,7 +690,7 @@ def main(argv=None):
     try:
         if args.out:  # (a new run: never over another run's files; the study commands pick their own folders)
             check_new_folder(args.out)
-        return train(args)
+        return train_agent(args)
     except RunFolderError as exc:  # another run's folder: a usage error, as argparse reports one (exit status 2)
         print(f"ppo_torch: error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None

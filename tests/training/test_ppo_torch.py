@@ -194,7 +194,7 @@ def test_it_learns_a_bandit_with_next_step_autoreset(tmp_path):
     args = Args(env_id="bandit", num_envs=16, total_timesteps=16 * 32 * 30, num_steps=32, minibatch_size=128,
                 update_epochs=10, learning_rate=1e-2, success_window=200, device="cpu", out=str(tmp_path))
     rows = []
-    _, res = ppo_torch.train(args, env=env, log=None, on_update=rows.append)
+    _, res = ppo_torch.train_agent(args, env=env, log=None, on_update=rows.append)
     first, last = rows[0], rows[-1]
     # a random policy (std 1) succeeds about 15 % of the time; the trained one most of the time
     assert first["success_rate"] < 0.35
