@@ -236,7 +236,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     buf = HerBuffer(E, args.buffer_per_env, vec.single_observation_space.shape[0], n_out, gdim)
 
     obs_np, info = vec.reset(seed=args.train_seed + 1_000_000 * args.seed)
-    obs = torch.as_tensor(obs_np)
+    obs = torch.tensor(obs_np)
     imp, clock = torch.zeros(E), torch.zeros(E)
     resetting = torch.zeros(E, dtype=torch.bool)  # NEXT_STEP: this step resets these envs (no transition)
     pending = sorted(int(c) for c in checkpoints)
@@ -248,9 +248,12 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     all_rows = torch.arange(E)
     next_val = args.val_every if args.val_every else None
 
+    called = []
+
     def checkpoint(n):
-        if on_checkpoint is not None:
+        if on_checkpoint is not None and (not called or called[-1] != n):
             on_checkpoint(n, make_policy(actor, k, args.head))
+        called.append(n)
 
     while steps < args.total_timesteps:
         mem = torch.stack([imp, clock], 1)
@@ -263,7 +266,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
         te = time.perf_counter()
         nobs_np, _, term, trunc, info = vec.step(A.to_env(obs, y, k, args.head).numpy())
         t_env += time.perf_counter() - te
-        nobs = torch.as_tensor(nobs_np)
+        nobs = torch.tensor(nobs_np)
         term_t, trunc_t = torch.as_tensor(term), torch.as_tensor(trunc)
         nimp = imp + torch.as_tensor(np.asarray(info["impacts"]), dtype=torch.float32)
         nmem = torch.stack([nimp, clock + 1], 1)
@@ -319,8 +322,10 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
                         pt.mul_(1 - args.tau).add_(args.tau * p_)
                 updates += 1
             t_upd += time.perf_counter() - tu
-        while pending and steps >= pending[0]:
-            checkpoint(pending.pop(0))
+        if pending and steps >= pending[0]:
+            while pending and steps >= pending[0]:
+                pending.pop(0)
+            checkpoint(steps)
         if next_val is not None and steps >= next_val:
             next_val += args.val_every
             val = A.validate(make_policy(actor, k, args.head), args.env_id, args.env_kwargs, args.val_episodes,
