@@ -75,6 +75,7 @@ class Args:
     lr: float = 3e-4
     hidden: int = 256
     her_k: int = 4                  # relabelled : original goals
+    alpha_init: float = 1.0         # the entropy temperature's start (tuned automatically to entropy -n_act)
     head: str = "pd"                # "pd" (heading / rolling-speed law) or "torque"
     train_seed: int = 10_000_000
     val_every: int = 0              # env steps between validation evaluations (0: none)
@@ -228,7 +229,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     actor = Actor(n_in, n_out, args.hidden)
     critic = Critic(n_in, n_out, args.hidden)
     critic_t = copy.deepcopy(critic).requires_grad_(False)
-    log_alpha = torch.zeros(1, requires_grad=True)
+    log_alpha = torch.full((1,), math.log(args.alpha_init), requires_grad=True)
     target_entropy = -float(n_out)
     opt_a = torch.optim.Adam(actor.parameters(), lr=args.lr)
     opt_c = torch.optim.Adam(critic.parameters(), lr=args.lr)

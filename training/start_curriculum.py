@@ -17,7 +17,9 @@ probes' 200). An episode started for demonstration j begins at its state k_j - u
 below 0), with the agent's clock set to that step and its impact counter to the demonstration's impacts before it,
 and the agent truncates it when its clock reaches the time limit (the real episode's remaining time). Once at least
 ``min_episodes`` episodes from demonstration j's current start have ended and at least ``threshold`` (20 %) of them
-succeeded, k_j moves back by ``back`` steps; when a demonstration succeeds from k_j = 0 (the real episode's start)
+succeeded, k_j moves back by ``back`` steps (``back`` times the number of whole thresholds the success rate holds, at
+most ``max_moves`` = 4 times: 80 % moves back 4 x ``back``; the budget of 5e6 env steps holds about 250 episodes per
+demonstration, too few for 30 single moves); when a demonstration succeeds from k_j = 0 (the real episode's start)
 it is done. Many demonstrations run at once: each episode that ends picks its next start, with probability
 ``p_own`` plus the share of finished demonstrations from the task's own start distribution (training seeds from
 10,000,000), else at a uniformly drawn unfinished demonstration. When every demonstration is done, every episode
@@ -84,6 +86,7 @@ class Args:
     threshold: float = 0.2          # Salimans & Chen's 20 %
     min_episodes: int = 8           # episodes from a start before it may move back
     back: int = 0                   # steps per move back (0: max(1, time limit // 50))
+    max_moves: int = 4              # a start with success rate r moves back min(max_moves, r // threshold) x back
     p_own: float = 0.1              # share of episodes from the task's own starts while demonstrations remain
     train_seed: int = 10_000_000
     val_every: int = 0              # env steps between validation evaluations (0: none)
@@ -150,9 +153,10 @@ def replay_impacts(env_id, env_kwargs, episodes, seed=10_000_000):
 class Curriculum:
     """The per-demonstration start steps and their success counts (module docstring)."""
 
-    def __init__(self, lengths, back, threshold, min_episodes, rng):
+    def __init__(self, lengths, back, threshold, min_episodes, rng, max_moves=1):
         self.T = np.asarray(lengths, np.int64)
         self.back, self.threshold, self.min_episodes, self.rng = back, threshold, min_episodes, rng
+        self.max_moves = max_moves
         self.k = np.maximum(self.T - back, 0)
         self.stage = np.zeros(len(self.T), np.int64)  # bumped when k moves: outcomes of older starts are ignored
         self.wins = np.zeros(len(self.T), np.int64)
@@ -176,8 +180,9 @@ class Curriculum:
                 continue
             if self.k[d] == 0:
                 self.done[d] = True
-            else:
-                self.k[d] = max(self.k[d] - self.back, 0)
+            else:  # back by `back` steps per multiple of the threshold reached, at most max_moves times
+                moves = min(self.max_moves, max(1, int(self.wins[d] / (self.threshold * self.n[d]))))
+                self.k[d] = max(self.k[d] - moves * self.back, 0)
                 self.stage[d] += 1
                 self.wins[d] = self.n[d] = 0
 
@@ -203,7 +208,8 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, demos=None,
     k = A.TaskConsts.of(vec)
     back = args.back or max(1, k.max_steps // 50)
     imp_demo, exact = replay_impacts(args.env_id, env_kwargs, episodes, args.train_seed) if episodes else ([], np.zeros(0, bool))
-    cur = Curriculum([len(a) for _, _, a in episodes], back, args.threshold, args.min_episodes, rng)
+    cur = Curriculum([len(a) for _, _, a in episodes], back, args.threshold, args.min_episodes, rng,
+                     args.max_moves)
     if not episodes:
         cur.done = np.ones(0, bool)
     n_out = A.head_dim(k, args.head)
