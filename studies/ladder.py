@@ -52,10 +52,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 DEFAULT_CONFIG = ROOT / "configs" / "ladder" / "cpu.yaml"
 QUICK_CONFIG = ROOT / "configs" / "ladder" / "quick.yaml"
-FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0}  # success bonus only (fair_pure_rl)
 KEYS = {"eval_seeds", "seeds", "first_checkpoint", "cells", "agents", "demos"}
 AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label"}
-TRAIN_SEED = 10_000_000  # training seeds: TRAIN_SEED + 1000 seed (never a pair seed 0..eval_seeds-1)
 DEMO_SEED = 100_000      # demonstrations: witness episodes of seeds DEMO_SEED + j
 README_BEGIN = "<!-- ladder-answer: written by python -m studies.ladder (studies/ladder.py) -->"
 README_END = "<!-- /ladder-answer -->"
@@ -208,17 +206,19 @@ def run_job(job: dict, runs: str) -> dict:
     import torch
     numba.set_num_threads(1)
     torch.set_num_threads(1)
-    from training.protocol import evaluate
+    from training.protocol import evaluate, fair_reward_kwargs
     out = job_dir(runs, job)
     out.mkdir(parents=True, exist_ok=True)
     module = importlib.import_module(job["module"])
     env_id, overrides = cell_spec(*job["cell"])
     extra = dict(job["args"])
-    if job["privileged"]:
-        extra["demos"] = str(demos_path(runs, job["cell"]))
-    args = dataclasses.replace(module.Args(), env_id=env_id, env_kwargs={**overrides, **FAIR_REWARD},
-                               seed=TRAIN_SEED + 1000 * job["seed"], total_timesteps=job["budget"], out=str(out),
-                               **extra)
+    if job["privileged"] and "demos" in {f.name for f in dataclasses.fields(module.Args)}:
+        extra["demos"] = str(demos_path(runs, job["cell"]))  # (Go-Explore is privileged by its resets, not demos)
+    # an agent with a ladder configuration (ppo_torch.ladder_args) starts from it; each agent maps its seed to
+    # training seeds from 10,000,000 itself (never a pair seed); every agent trains on the fair reward
+    make_args = getattr(module, "ladder_args", module.Args)
+    args = make_args(env_id=env_id, env_kwargs={**overrides, **fair_reward_kwargs(env_id, overrides)},
+                     seed=job["seed"], total_timesteps=job["budget"], out=str(out), **extra)
     rows = []
     progress = out / "checkpoints.jsonl"
     progress.unlink(missing_ok=True)

@@ -19,7 +19,6 @@ import torch.nn as nn
 KP, KD = 25.0, 10.0  # heading PD law [1/s^2, 1/s] (critically damped at 5 rad/s)
 KW = 40.0            # rolling-speed P law [1/s]
 V_MAX = 0.25         # [m/s] the drive head's largest commanded rolling speed
-FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "success_bonus": 10.0}
 FEATURES_DIM = 19
 
 

@@ -149,7 +149,7 @@ def explore(args: Args, log=print):
     arch = Archive(args.pairs)
     keys0 = cell_keys(S0, G0, k, args.pos_bin)
     for p in range(args.pairs):
-        arch.offer(p, tuple(keys0[p]), S0[p], 0, 0, -1, np.zeros((0, vec.single_action_space.shape[0])), p)
+        arch.offer(p, tuple(keys0[p]), S0[p], 0, 0, -1, np.zeros((0, vec.single_action_space.shape[0])))
     solved = {}
     n_act = vec.single_action_space.shape[0]
     seg = np.zeros((N, args.segment, n_act))
@@ -211,7 +211,7 @@ def explore(args: Args, log=print):
                 continue
             if not term[i] and clock[i] < k.max_steps:
                 node_key = tuple(keys[i])
-                if arch.offer(p, node_key, S[i], clock[i], imp[i], start_node[i], seg[i, :seg_len[i]], p):
+                if arch.offer(p, node_key, S[i], clock[i], imp[i], start_node[i], seg[i, :seg_len[i]]):
                     # the env goes on from the new node: its segment restarts there
                     start_node[i] = arch.cells[p][node_key]
                     seg_len[i] = 0
@@ -286,10 +286,11 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     stats["certified"] = len(episodes)
     log(f"go_explore {args.env_id} seed {args.seed}: explored {steps:,} steps, {stats['cells']:,} cells, solved "
         f"{stats['solved']}/{args.pairs} pairs, {len(episodes)} certified trajectories")
-    cargs = SC.Args(env_id=args.env_id, env_kwargs=args.env_kwargs, seed=args.seed,
-                    total_timesteps=max(args.total_timesteps - steps, 1), torch_threads=args.torch_threads,
-                    head=args.head, val_every=args.val_every, val_episodes=args.val_episodes, val_seed=args.val_seed,
-                    **args.curriculum)
+    # phase 2's own fields (args.curriculum) first; those of this run (env, seed, budget, head) win
+    cargs = SC.Args(**{**args.curriculum, "env_id": args.env_id, "env_kwargs": args.env_kwargs, "seed": args.seed,
+                       "total_timesteps": max(args.total_timesteps - steps, 1), "torch_threads": args.torch_threads,
+                       "head": args.head, "val_every": args.val_every, "val_episodes": args.val_episodes,
+                       "val_seed": args.val_seed})
     res = SC.train(cargs, checkpoints, on_checkpoint, log, demos=to_demos(episodes) if episodes else _no_demos(),
                    step_offset=steps)
     res.update(stats)

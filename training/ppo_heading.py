@@ -66,9 +66,9 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn as nn
+from training.protocol import fair_reward_kwargs
 
 # -- hyperparameters ------------------------------------------------------------------------------------
-FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "success_bonus": 10.0}
 TRAIN_SEED, VAL_SEED = 10_000_000, 50_000
 KP, KD = 25.0, 10.0  # heading PD law [1/s^2, 1/s] (studies/witness.py's)
 KW = 40.0  # rolling-speed P law [1/s] (studies/witness.py's DriveReach)
@@ -289,10 +289,7 @@ class HeadingPolicy:
 # -- training -----------------------------------------------------------------------------------------------
 def training_kwargs(args: Args) -> dict:
     """The training env's fields: the cell's overrides and the fair reward's (those the task has)."""
-    from penny_env.envs.scene import env_presets, resolve
-    spec = dict(env_presets()[args.env_id])
-    _, task = resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **args.env_kwargs})
-    return {**args.env_kwargs, **{k: v for k, v in FAIR_REWARD.items() if hasattr(task, k)}}
+    return {**args.env_kwargs, **fair_reward_kwargs(args.env_id, args.env_kwargs)}
 
 
 def make_env(env_id, num_envs, kwargs):

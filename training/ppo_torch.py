@@ -76,6 +76,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 from torch.distributions.normal import Normal
+from training.protocol import FAIR_REWARD, fair_reward_kwargs  # noqa: F401 (FAIR_REWARD: the reward it trains on)
 
 DEVICES = ("auto", "cpu", "cuda")
 ROOT = Path(__file__).resolve().parents[1]  # the checkout (configs/ lives there)
@@ -115,7 +116,6 @@ class Args:
 
 
 # the fair reward of studies/fair_pure_rl.py (REWARD): the success bonus only
-FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "success_bonus": 10.0}
 # the fast configuration on a CPU: few, large minibatches over many envs (the update's cost is samples x epochs)
 FAST_CPU = {"num_envs": 4096, "num_steps": 32, "minibatch_size": 16384, "update_epochs": 2, "device": "cpu"}
 # the ladder's plain PPO ("ppo"): the fast configuration, gamma 0.999, the fair reward, training seeds >= 1e7
@@ -225,10 +225,7 @@ def reward_kwargs(args: Args) -> dict:
     """FAIR_REWARD's fields that the env's task has (fair_reward), else none."""
     if not args.fair_reward:
         return {}
-    from penny_env.envs.scene import env_presets, resolve
-    spec = dict(env_presets()[args.env_id])
-    _, task = resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **args.env_kwargs})
-    return {k: v for k, v in FAIR_REWARD.items() if hasattr(task, k)}
+    return fair_reward_kwargs(args.env_id, args.env_kwargs)
 
 
 def make_env(args: Args, num_envs: int | None = None):

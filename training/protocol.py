@@ -28,6 +28,18 @@ from typing import Protocol
 import numpy as np
 
 
+FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "success_bonus": 10.0}
+
+
+def fair_reward_kwargs(env_id: str, env_kwargs: dict | None = None) -> dict:
+    """The fields of FAIR_REWARD (the success bonus only: studies/fair_pure_rl.py's reward) that the task of
+    ``env_id`` with ``env_kwargs`` has (reach has no speed cost), so every agent trains on the same reward."""
+    from penny_env.envs.scene import env_presets, resolve
+    spec = dict(env_presets()[env_id])
+    _, task = resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **(env_kwargs or {})})
+    return {k: v for k, v in FAIR_REWARD.items() if hasattr(task, k)}
+
+
 class Policy(Protocol):
     """A deterministic policy for the vector env, possibly with state of its own (an agent's clock, its count of
     impacts, a previous action): ``reset(num_envs)`` before the first step of every env's episode (the evaluation

@@ -53,7 +53,7 @@ import torch
 import torch.nn as nn
 
 from . import agent_side as A
-from .protocol import load_demos
+from .protocol import fair_reward_kwargs, load_demos
 
 
 @dataclass
@@ -82,7 +82,7 @@ class Args:
     head: str = "pd"
     shaping: bool = True            # the agent's potential-based shaping (agent_side.potential)
     v_flat: float = 0.5
-    fair_reward: bool = True        # the env's reward reduced to the success bonus (agent_side.FAIR_REWARD)
+    fair_reward: bool = True        # the env's reward reduced to the success bonus (training.protocol.FAIR_REWARD)
     threshold: float = 0.2          # Salimans & Chen's 20 %
     min_episodes: int = 8           # episodes from a start before it may move back
     back: int = 0                   # steps per move back (0: max(1, time limit // 50))
@@ -202,7 +202,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, demos=None,
             raise ValueError("start_curriculum needs demonstrations: Args.demos (an .npz of protocol.save_demos)")
         demos = load_demos(args.demos)
     episodes = demo_episodes(demos)
-    env_kwargs = {**(A.FAIR_REWARD if args.fair_reward else {}), **args.env_kwargs}
+    env_kwargs = {**(fair_reward_kwargs(args.env_id, args.env_kwargs) if args.fair_reward else {}), **args.env_kwargs}
     N, T = args.num_envs, args.num_steps
     vec = A.make_vec(args.env_id, N, env_kwargs)
     k = A.TaskConsts.of(vec)
