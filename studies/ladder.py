@@ -53,7 +53,7 @@ DOCS = ROOT / "docs"
 DEFAULT_CONFIG = ROOT / "configs" / "ladder" / "cpu.yaml"
 QUICK_CONFIG = ROOT / "configs" / "ladder" / "quick.yaml"
 KEYS = {"eval_seeds", "seeds", "first_checkpoint", "cells", "agents", "demos"}
-AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label"}
+AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label", "seeds"}
 DEMO_SEED = 100_000      # demonstrations: witness episodes of seeds DEMO_SEED + j
 README_BEGIN = "<!-- ladder-answer: written by python -m studies.ladder (studies/ladder.py) -->"
 README_END = "<!-- /ladder-answer -->"
@@ -94,6 +94,9 @@ def load_config(path) -> dict:
         if not isinstance(a, dict) or set(a) - AGENT_KEYS or not {"module", "privileged", "probes", "budget"} <= set(a):
             raise ValueError(f"{path}: agents.{name} must have module, privileged, probes, budget (and may have args, "
                              f"label), got {sorted(a) if isinstance(a, dict) else a!r}")
+        if "seeds" in a and not _seed_list(a["seeds"]):
+            raise ValueError(f"{path}: agents.{name}.seeds must be a list of distinct non-negative integers (the "
+                             f"agent's own seeds, instead of the config's), got {a['seeds']!r}")
         if not isinstance(a["privileged"], bool):
             raise ValueError(f"{path}: agents.{name}.privileged must be true or false")
         if not set(a["probes"]) <= set(PROBE_TASKS):
@@ -120,6 +123,16 @@ def load_config(path) -> dict:
     return cfg
 
 
+def _seeds_words(cfg) -> str:
+    own = {n: a["seeds"] for n, a in cfg["agents"].items() if "seeds" in a}
+    return ", ".join([f"{cfg['seeds']}"] + [f"{n} {s}" for n, s in own.items()])
+
+
+def _seed_list(seeds) -> bool:
+    return (isinstance(seeds, list) and bool(seeds) and len(set(seeds)) == len(seeds)
+            and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in seeds))
+
+
 def checkpoints(first: int, budget: int) -> list[int]:
     """Log-spaced evaluation budgets: half decades from ``first`` up to ``budget``, and the budget itself."""
     out, k = [], 0
@@ -144,7 +157,7 @@ def make_jobs(cfg) -> list[dict]:
             if cell[0] not in a["probes"]:
                 continue
             budget = int(a["budget"].get("/".join(cell), a["budget"][cell[0]]))  # (a cell's own, else its probe's)
-            for seed in cfg["seeds"]:
+            for seed in a.get("seeds", cfg["seeds"]):
                 jobs.append({"agent": name, "module": a["module"], "privileged": a["privileged"], "cell": list(cell),
                              "seed": seed, "budget": budget, "checkpoints": checkpoints(cfg["first_checkpoint"], budget),
                              "args": dict(a.get("args") or {}), "eval_seeds": cfg["eval_seeds"]})
@@ -409,7 +422,8 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
     lines = header("The agent ladder: learned agents on the single-input cells beside the certified witnesses",
                    "studies.ladder", list(argv))
     lines += [f"- jobs: {done} of {len(jobs)} finished ({cpu / 3600:.1f} CPU hours in the finished jobs; this "
-              f"invocation {seconds:.0f} s); {len(cfg['seeds'])} seeds per (agent, cell); evaluation: one deterministic "
+              f"invocation {seconds:.0f} s); seeds per (agent, cell): {_seeds_words(cfg)} (the seeds column counts "
+              f"those finished); evaluation: one deterministic "
               f"episode per pair seed 0..{cfg['eval_seeds'] - 1} (training/protocol.evaluate), the witness study's",
               "- privileged agents (PRIVILEGED below) reset their training envs to chosen states and learn from certified "
               f"witness episodes of training seeds {DEMO_SEED}+ (never the pair seeds); the others see only what the env "
