@@ -45,6 +45,7 @@ import torch
 
 from . import agent_side as A
 from . import start_curriculum as SC
+from .protocol import no_demos
 
 GO_SEED_MIN = 20_000_000
 
@@ -291,17 +292,12 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
                        "total_timesteps": max(args.total_timesteps - steps, 1), "torch_threads": args.torch_threads,
                        "head": args.head, "val_every": args.val_every, "val_episodes": args.val_episodes,
                        "val_seed": args.val_seed})
-    res = SC.train(cargs, checkpoints, on_checkpoint, log, demos=to_demos(episodes) if episodes else _no_demos(),
+    res = SC.train(cargs, checkpoints, on_checkpoint, log, demos=to_demos(episodes) if episodes else no_demos(),
                    step_offset=steps)
     res.update(stats)
     res["wall_time_s"] = time.perf_counter() - t0
     res["steps_per_s"] = res["env_steps"] / res["wall_time_s"]
     return res
-
-
-def _no_demos() -> dict:
-    return {"states": np.zeros((0, 6)), "targets": np.zeros((0, 2)), "episode": np.zeros(0, np.int64),
-            "step": np.zeros(0, np.int64), "length": np.zeros(0, np.int64), "actions": np.zeros((0, 1))}
 
 
 def main(argv=None):

@@ -93,7 +93,11 @@ def evaluate(policy: Policy, env_id: str, env_kwargs: dict | None = None, seeds=
 def save_demos(path, episodes) -> None:
     """Demonstrations for privileged agents as one .npz: ``episodes`` a list of (states (T+1, 6), target (2,), actions
     (T, n_act)) of successful episodes (state t is the one before action t); stored as ``states`` (M, 6),
-    ``targets`` (M, 2), ``episode`` (M,), ``step`` (M,), ``length`` (E,) and ``actions`` (M - E, n_act)."""
+    ``targets`` (M, 2), ``episode`` (M,), ``step`` (M,), ``length`` (E,) and ``actions`` (M - E, n_act).
+    No episodes (a cell with no witness, such as the plane) is stored as empty arrays: :func:`no_demos`."""
+    if not episodes:
+        np.savez(path, **no_demos())
+        return
     states = np.concatenate([np.asarray(s, float) for s, _, _ in episodes])
     targets = np.concatenate([np.repeat(np.asarray(t, float)[None], len(s), 0) for s, t, _ in episodes])
     episode = np.concatenate([np.full(len(s), j) for j, (s, _, _) in enumerate(episodes)])
@@ -101,6 +105,12 @@ def save_demos(path, episodes) -> None:
     length = np.array([len(s) - 1 for s, _, _ in episodes])
     actions = np.concatenate([np.asarray(a, float).reshape(len(s) - 1, -1) for s, _, a in episodes])
     np.savez(path, states=states, targets=targets, episode=episode, step=step, length=length, actions=actions)
+
+
+def no_demos() -> dict:
+    """The arrays of :func:`save_demos` for no episode (a privileged agent then starts from the task's own draws)."""
+    return {"states": np.zeros((0, 6)), "targets": np.zeros((0, 2)), "episode": np.zeros(0, np.int64),
+            "step": np.zeros(0, np.int64), "length": np.zeros(0, np.int64), "actions": np.zeros((0, 1))}
 
 
 def load_demos(path) -> dict:
