@@ -1,38 +1,58 @@
-"""GPU throughput of the vector env: ``env.step``, its kernels alone, and the step replayed from a CUDA graph,
-side by side per N, against the compiled CPU backend on every core of the same machine.
+"""GPU throughput of the vector env, like for like: every column steps the same actions from the same saved state.
 
-``python -m devtools.throughput_gpu [--quick] [--out PATH] [--env-id ID] [--sizes N ...] [--variants]``
+``python -m devtools.throughput_gpu [--quick] [--out PATH] [--ids ID ...] [--sizes N ...] [--window 32]
+[--steady-after 300] [--variants] [--variant-sizes N ...] [--no-cpu] [--cpu-sizes N ...] [--ppo-sizes N ...]``
 
-For each N (default 4096, 65536, 1M, 4M), PennyVectorEnv(N, backend="cuda") with torch outputs, actions drawn on
-the device beforehand (float32, as a policy gives them), timed over a run of steps after warm-up steps, with
-torch.cuda.synchronize() at the end:
+For each id (default: PennyReach-Ellipse-v0, PennyImpacts-Stadium-v0 and the single-input probe
+PennyProbeSteer-Stadium-Elastic-v0) and each N (default 4096, 65,536, 1M, 4M), a PennyVectorEnv(N, backend="cuda")
+with torch outputs is reset with seed 0 and its state saved (the **fresh** window's start); it then steps
+``--steady-after`` (>= 300) steps of random actions and its state is saved again (the **steady** window's start).
+One sequence of ``--window`` action sets is drawn beforehand (uniform in the action box, float32, on the device;
+the same numbers on the host for the CPU). Every column restores the window's saved state and steps that
+sequence, timed with a synchronization at each end:
 
-* ``env.step``: the whole step as users call it (the actions' copy into the env's buffer, the kernels, the
-  outputs and the info dict);
-* kernels alone: the step's prepared launches (backends/cuda_env.DeviceStep.launch) in a loop, no Python around
-  them: what the GPU itself does per step (the autoreset included);
-* graph replay: backends/cuda_env.CudaGraphStep (the step captured in a CUDA graph, then replayed);
-* the CPU backend (numba, all cores) on the same N (fewer steps where N is large);
-* device memory per env: the bytes of the env's state, buffers and two output sets, over N.
+* ``env.step``: the step as users call it (the actions' copy into the env's buffer, the kernels, the outputs and
+  the info dict): Isaac Lab's "env only" column;
+* kernels alone: the actions' copy on the device and the step's prepared launches (backends/cuda_env.DeviceStep),
+  no Python around them;
+* graph replay: backends/cuda_env.CudaGraphStep (one step captured in a CUDA graph, replayed per action set);
+* env + policy: env.step and, per step, the inference of a 64x64 tanh MLP policy on the step's observation (its
+  actions written to a rollout buffer; the env steps the sequence's actions, so that its work is the other columns');
+* env + PPO: a rollout of the window (the policy's log-probabilities and values of the sequence's actions, the
+  env's step, the buffer's writes), then GAE and a PPO update (training.ppo_torch: 4 epochs of 4 minibatches)
+  on it, per env-step of the rollout;
+* the CPU backend (numba, every core of the machine) from the same state, on the same actions;
+* ``--variants``: the kernels alone of the step built other ways (one kernel; the split step without a register
+  cap; capped at 64), each restoring the same state and stepping the same actions.
 
-``--variants`` also times the kernels alone for the other ways to build the step (one kernel for everything;
-the fast kernel without a register cap or with 64): the measurement that chose the defaults
-(backends/env.FAST_MAX_REGISTERS, the split into a fast and a rare kernel).
+Each window's rare share is the share of its env-steps that the fast kernel left to the rare kernel (the rare
+list's length read after each step of an untimed pass over the same steps), and the final states of the columns
+are compared bitwise (``same end state``; the CPU's not: on a GPU fused multiply-adds and libdevice's sin and cos
+differ from the CPU's in the last bits, docs/gpu.md). Every row names its window in its own text.
 
-It needs a CUDA GPU with numba-cuda and torch. Where there is none (the CUDA simulator does not count: it
-measures nothing about a GPU) it prints so and writes no report. Targets: env.step at least 1e9
-env-steps/s at the best N, at least 0.8 of the kernels alone at N >= 65,536, at least 1.2e7 at N = 4096.
+Without a GPU the command says so and writes no report; ``--quick`` runs the whole table under numba's CUDA
+simulator at tiny N (NUMBA_ENABLE_CUDASIM=1: numba device arrays instead of torch tensors on the GPU, the policy
+and PPO columns on the CPU's torch, no graph replay), which the tests use: its numbers time nothing about a GPU.
+Targets (issue 38), steady window: env.step at least 1e9 env-steps/s on PennyReach-Ellipse-v0 and 5e8 on
+PennyImpacts-Stadium-v0 at the best N, 1.2e7 at N = 4096, at least 0.8 of its own kernels alone.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import time
 
+import numpy as np
+
 SIZES = (4096, 65536, 1_048_576, 4_194_304)
-ENV_ID = "PennyReach-Ellipse-v0"
+IDS = ("PennyReach-Ellipse-v0", "PennyImpacts-Stadium-v0", "PennyProbeSteer-Stadium-Elastic-v0")
 VARIANTS = ({"kernels": "one"}, {"kernels": "split", "max_registers": None}, {"kernels": "split", "max_registers": 64})
+WINDOW = 32
+STEADY_AFTER = 300
+PPO_EPOCHS, PPO_MINIBATCHES = 4, 4
+TARGETS = {"PennyReach-Ellipse-v0": 1e9, "PennyImpacts-Stadium-v0": 5e8}
 
 
 def gpu_here() -> str | None:
@@ -50,140 +70,396 @@ def gpu_here() -> str | None:
         return None
 
 
-def make(env_id, n, **cuda_options):
+def simulated() -> bool:
+    return os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
+
+
+class Device:
+    """What differs between a GPU and numba's CUDA simulator: the actions' arrays, the outputs, synchronization."""
+
+    def __init__(self, sim: bool):
+        from numba import cuda
+        self.sim, self.cuda = sim, cuda
+        try:
+            import torch
+        except ImportError:
+            torch = None
+        self.torch = torch
+        self.outputs = "device" if sim else "torch"
+
+    def sync(self):
+        if self.sim:
+            self.cuda.synchronize()
+        else:
+            self.torch.cuda.synchronize()
+
+    def upload(self, host):
+        """A (T, N, k) float32 host array on the device, indexable per step (float64 numba arrays in simulation:
+        the env takes numba device actions as float64)."""
+        if self.sim:
+            return [self.cuda.to_device(np.ascontiguousarray(a, dtype=np.float64)) for a in host]
+        return self.torch.as_tensor(host, device="cuda")
+
+    def random_actions(self, n, k, seed):
+        """A function t -> random actions on the device (the steps before the steady window)."""
+        if self.sim:
+            rng = np.random.default_rng(seed)
+            return lambda t: self.cuda.to_device(rng.uniform(-1.0, 1.0, (n, k)))
+        g = self.torch.Generator(device="cuda").manual_seed(seed)
+        return lambda t: self.torch.rand((n, k), device="cuda", generator=g) * 2 - 1
+
+    def to_torch(self, x):
+        """A step's output as a torch tensor (on the GPU; the host's torch in simulation)."""
+        if self.sim:
+            return self.torch.as_tensor(np.asarray(x.copy_to_host(), dtype=np.float32))
+        return x.float() if x.dtype != self.torch.float32 else x
+
+    def copy_actions(self, dev, a):
+        """The actions' copy into the env's buffer, on the device (what env.step does before its launches)."""
+        if self.sim:
+            dev.actions.copy_to_device(a, stream=dev.stream())
+        else:
+            dev._actions_t().copy_(a)
+
+    @property
+    def torch_device(self):
+        return "cpu" if self.sim else "cuda"
+
+
+def make(env_id, n, device: Device, **cuda_options):
     import gymnasium as gym
-    env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", backend="cuda",
-                       cuda_options=cuda_options or None).unwrapped
-    env.reset(seed=0)
-    return env
+    return gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", backend="cuda",
+                        outputs=device.outputs, cuda_options=cuda_options or None).unwrapped
 
 
-def timed(f, steps, warmup=3):
-    import torch
-    for _ in range(warmup):
-        f()
-    torch.cuda.synchronize()
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        f()
-    torch.cuda.synchronize()
-    return time.perf_counter() - t0
+def restore(env, state):
+    """The env's state set to ``state`` (functional.EnvState of numpy arrays: a copy goes in)."""
+    from penny_env.step.functional import EnvState
+    env._runner.state_from_host(EnvState(*(np.array(a, copy=True) for a in state)))
+    env._limits = None
 
 
-def rates(env_id, n, steps, **cuda_options) -> dict:
-    """env.step, kernels alone and graph replay (env-steps/s) at N = n, and the device bytes per env."""
-    import torch
+def end_state(env):
+    return env._runner.state_to_host().S.copy()
 
-    from penny_env.backends.cuda_env import CudaGraphStep
-    env = make(env_id, n, **cuda_options)
+
+def saved_states(env, device: Device, steady_after: int) -> dict:
+    """{"fresh": the state right after reset(seed=0), "steady": after steady_after random steps}."""
     k = env.single_action_space.shape[0]
-    g = torch.Generator(device="cuda").manual_seed(0)
-    acts = torch.rand((8, n, k), device="cuda", dtype=torch.float32, generator=g) * 2 - 1
-    i = [0]
-
-    def step():
-        env.step(acts[i[0] % 8])
-        i[0] += 1
-    # each way from the same state (a reset with seed 0): the state's impacts, not the order, set the work
-    out = {"env.step": n * steps / timed(step, steps)}
-    dev = env._runner
-    parity = [0]
-
-    def kernels():
-        dev.launch(parity[0])
-        parity[0] ^= 1
     env.reset(seed=0)
-    env.step(acts[0])  # (the actions' buffer holds one set of actions; the kernels alone step on them)
-    out["kernels alone"] = n * steps / timed(kernels, steps)
-    out["prepared"] = all(p.fast for pair in dev.launches for p in pair)  # (False: numba's dispatcher launched)
-    env.reset(seed=0)
-    graphed = CudaGraphStep(env)
-    out["graph replay"] = n * steps / timed(lambda: graphed(acts[0]), steps)
-    arrays = list(dev.st) + [dev.actions, dev.work, dev.reset_obs] + [a for s in dev.sets for part in s for a in part]
-    out["bytes per env"] = sum(a.nbytes for a in arrays) / n
-    env.close()
+    out = {"fresh": env._runner.state_to_host()}
+    draw = device.random_actions(env.num_envs, k, seed=12345)
+    for t in range(steady_after):
+        env.step(draw(t))
+    device.sync()
+    out["steady"] = env._runner.state_to_host()
     return out
 
 
-def kernel_rate(env_id, n, steps, **cuda_options) -> float:
-    env = make(env_id, n, **cuda_options)
+def timed(device: Device, start, step, steps: int) -> float:
+    """Seconds of steps calls of step(t) after start(), with a synchronization at both ends."""
+    start()
+    device.sync()
+    t0 = time.perf_counter()
+    for t in range(steps):
+        step(t)
+    device.sync()
+    return time.perf_counter() - t0
+
+
+def rare_share(env, device: Device, state, acts, steps: int) -> float:
+    """The share of env-steps the fast kernel left to the rare kernel over the window (an untimed pass)."""
+    restore(env, state)
     dev = env._runner
-    parity = [0]
-
-    def kernels():
-        dev.launch(parity[0])
-        parity[0] ^= 1
-    r = n * steps / timed(kernels, steps)
-    env.close()
-    return r
+    listed = 0
+    for t in range(steps):
+        env.step(acts[t])
+        listed += int(dev.work_count.copy_to_host()[0])
+    return listed / (steps * env.num_envs)
 
 
-def cpu_rate(env_id: str, n: int, steps: int) -> float:
-    import gymnasium as gym
+class PolicyColumns:
+    """The policy of the env + policy and env + PPO columns: training.ppo_torch's Agent (64x64 tanh MLPs)."""
 
-    from devtools.throughput import vector_rate
-    return vector_rate(lambda m: gym.make_vec(env_id, num_envs=m, vectorization_mode="vector_entry_point"), n, steps)
+    def __init__(self, device: Device, obs_dim: int, act_dim: int, n: int, steps: int, rollout: bool):
+        from training.ppo_torch import Agent, Args
+        torch = device.torch
+        self.torch, self.device = torch, device
+        torch.manual_seed(0)
+        self.agent = Agent(obs_dim, act_dim, (64, 64)).to(device.torch_device)
+        self.optimizer = torch.optim.Adam(self.agent.parameters(), lr=3e-4, eps=1e-5)
+        batch = steps * n
+        self.args = Args(num_envs=n, num_steps=steps, update_epochs=PPO_EPOCHS,
+                         minibatch_size=max(1, batch // PPO_MINIBATCHES))
+        z = lambda *shape: torch.zeros(shape, device=device.torch_device)  # noqa: E731
+        self.out = z(n, act_dim)
+        if not rollout:
+            return
+        self.obs, self.actions = z(steps, n, obs_dim), z(steps, n, act_dim)
+        self.logprobs, self.values, self.rewards, self.dones = z(steps, n), z(steps, n), z(steps, n), z(steps, n)
+
+    def infer(self, obs):
+        with self.torch.no_grad():
+            self.out.copy_(self.agent.act(self.device.to_torch(obs)))
+
+    def record(self, t, obs, acts_t):
+        """The rollout's writes before step t: the observation, the sequence's action, its log-probability and value."""
+        x = self.device.to_torch(obs)
+        a = self.device.to_torch(acts_t) if self.device.sim else acts_t.float()
+        with self.torch.no_grad():
+            _, logprob, _, value = self.agent.get_action_and_value(x, a)
+        self.obs[t].copy_(x)
+        self.actions[t].copy_(a)
+        self.logprobs[t].copy_(logprob)
+        self.values[t].copy_(value)
+
+    def after_step(self, t, reward, terminated, truncated):
+        r, te, tu = (self.device.to_torch(v) for v in (reward, terminated, truncated))
+        self.rewards[t].copy_(r)
+        self.dones[t].copy_(self.torch.maximum(te, tu))
+
+    def update(self, last_obs):
+        from training.ppo_torch import compute_gae, ppo_update
+        torch = self.torch
+        with torch.no_grad():
+            next_value = self.agent.get_value(self.device.to_torch(last_obs))
+            valid = torch.ones_like(self.rewards)
+            adv, ret = compute_gae(self.rewards, self.values, self.dones, self.dones, valid, next_value, 0.99, 0.95)
+        d = self.obs.shape[-1]
+        ppo_update(self.agent, self.optimizer, self.obs.reshape(-1, d), self.actions.reshape(-1, self.actions.shape[-1]),
+                   self.logprobs.reshape(-1), adv.reshape(-1), ret.reshape(-1), self.args)
+
+
+def columns(env_id, n, window, steady_after, device: Device, cpu: bool, ppo: bool, variants) -> list:
+    """One row per window (fresh, steady): {column: env-steps/s} and the window's rare share."""
+    env = make(env_id, n, device)
+    dev = env._runner
+    k, d = env.single_action_space.shape[0], env.single_observation_space.shape[0]
+    states = saved_states(env, device, steady_after)
+    host = np.random.default_rng(7).uniform(-1.0, 1.0, (window, n, k)).astype(np.float32)
+    acts = device.upload(host)
+    rows = []
+    graphed = None
+    if not device.sim:
+        from penny_env.backends.cuda_env import CudaGraphStep
+        graphed = CudaGraphStep(env)  # (its warm-up steps move the envs: every column restores its state below)
+    policy = PolicyColumns(device, d, k, n, window, ppo) if device.torch is not None else None
+    cpu_env = None
+    if cpu:
+        import gymnasium as gym
+        cpu_env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point").unwrapped
+        cpu_env.reset(seed=0)
+    variant_envs = [(opts, make(env_id, n, device, **opts)) for opts in variants]
+    for venv in (v for _, v in variant_envs):
+        venv.reset(seed=0)
+    for window_name in ("fresh", "steady"):
+        state = states[window_name]
+        first = 0 if window_name == "fresh" else steady_after
+        text = (f"fresh: steps {first + 1}-{first + window} after reset(seed=0)" if window_name == "fresh" else
+                f"steady: steps {first + 1}-{first + window} (after {steady_after} random steps)")
+        r = {"window": window_name, "text": text, "rare": rare_share(env, device, state, acts, window)}
+        ends = {}
+
+        def go(name, fn, on=env, start=None):
+            r[name] = n * window / timed(device, start or (lambda: restore(on, state)), fn, window)
+            ends[name] = end_state(on)
+        go("env.step", lambda t: env.step(acts[t]))
+        parity = [0]
+
+        def kernels(t, e=env):
+            device.copy_actions(e._runner, acts[t])
+            e._runner.launch(parity[0])
+            parity[0] ^= 1
+        go("kernels alone", kernels)
+        if graphed is not None:
+            go("graph replay", lambda t: graphed(acts[t]))
+        if policy is not None:
+            go("env + policy", lambda t: policy.infer(env.step(acts[t])[0]))
+            if ppo:
+                last = {}
+
+                def start_ppo():
+                    restore(env, state)
+                    last["obs"] = dev.reset_obs  # (the window's first observation: the reset's buffer, same shape)
+
+                def ppo_step(t):
+                    policy.record(t, last["obs"], acts[t])
+                    obs, reward, term, trunc, _ = env.step(acts[t])
+                    policy.after_step(t, reward, term, trunc)
+                    last["obs"] = obs
+                    if t == window - 1:
+                        policy.update(obs)
+                go("env + PPO", ppo_step, start=start_ppo)
+        for opts, venv in variant_envs:
+            vp = [0]
+
+            def vkernels(t, e=venv, vp=vp):
+                device.copy_actions(e._runner, acts[t])
+                e._runner.launch(vp[0])
+                vp[0] ^= 1
+            go(variant_label(opts), vkernels, on=venv)
+        if cpu_env is not None:
+            t0_state = state
+
+            def cpu_start():
+                restore(cpu_env, t0_state)
+            r["CPU"] = n * window / timed_cpu(cpu_start, lambda t: cpu_env.step(host[t]), window)
+        ref = ends["env.step"]
+        r["same end state"] = {name: bool(np.array_equal(ref.view(np.int64), s.view(np.int64))) for name, s in ends.items()}
+        rows.append(r)
+    arrays = list(dev.st) + [dev.actions, dev.work, dev.reset_obs] + [a for s in dev.sets for part in s for a in part]
+    for row in rows:
+        row["bytes per env"] = sum(a.nbytes for a in arrays) / n
+        row["prepared"] = all(p.fast for pair in dev.launches for p in pair)
+    for e in [env] + [v for _, v in variant_envs] + ([cpu_env] if cpu_env is not None else []):
+        e.close()
+    return rows
+
+
+def timed_cpu(start, step, steps):
+    start()
+    t0 = time.perf_counter()
+    for t in range(steps):
+        step(t)
+    return time.perf_counter() - t0
+
+
+def variant_label(opts) -> str:
+    if opts["kernels"] == "one":
+        return "one kernel"
+    return f"split, {'no cap' if opts['max_registers'] is None else str(opts['max_registers']) + ' registers'}"
+
+
+def fmt(v):
+    return "-" if v is None else f"{v:,.0f}"
+
+
+def report(a, argv, name, results, sim) -> list:
+    from penny_env.backends.env import FAST_MAX_REGISTERS
+    from studies.common import header
+    lines = header("GPU throughput of the vector env, like for like", "devtools.throughput_gpu", argv)
+    lines += [f"- device: {name}; CPU backend (numba) on {os.cpu_count()} cores of the same machine", ""]
+    if sim:
+        lines += ["**Run under numba's CUDA simulator (`--quick`): these numbers time the simulator, nothing about a "
+                  "GPU.**", ""]
+    lines += [f"Each row: one window of {a.window} steps of one sequence of random action sets (uniform, float32, drawn "
+              "beforehand), every column from the same saved state on the same actions (module docstring): env-steps "
+              "per second. Fresh: the window starts right after reset(seed=0); steady: it starts after "
+              f"{a.steady_after} random steps. Rare: the share of the window's env-steps that went to the rare kernel. "
+              "Kernels alone: the action copy on the device and the three prepared launches; env + policy: a 64x64 "
+              f"MLP's inference per step; env + PPO: the rollout, GAE and a PPO update ({PPO_EPOCHS} epochs of "
+              f"{PPO_MINIBATCHES} minibatches) per env-step. Same end state: every column ended the window in the "
+              "same states, bit for bit, as env.step.", ""]
+    heads = ["id", "N", "window", "rare", "env.step", "kernels alone", "env.step / kernels", "graph replay",
+             "env + policy", "env + PPO", "CPU (numba, all cores)", "env.step / CPU", "same end state"]
+    body, var_rows = [], []
+    for (env_id, n), rows in results.items():
+        for r in rows:
+            cpu = r.get("CPU")
+            same = r["same end state"]
+            body.append([env_id, f"{n:,}", r["text"], f"{100 * r['rare']:.2f} %", fmt(r["env.step"]),
+                         fmt(r["kernels alone"]), f"{r['env.step'] / r['kernels alone']:.2f}", fmt(r.get("graph replay")),
+                         fmt(r.get("env + policy")), fmt(r.get("env + PPO")), fmt(cpu),
+                         "-" if cpu is None else f"{r['env.step'] / cpu:.1f}x",
+                         "yes" if all(same.values()) else "no: " + ", ".join(k for k, v in same.items() if not v)])
+            labels = [variant_label(o) for o in VARIANTS]
+            if any(lab in r for lab in labels):
+                var_rows.append([env_id, f"{n:,}", r["text"], f"{100 * r['rare']:.2f} %", fmt(r["kernels alone"])]
+                                + [fmt(r.get(lab)) for lab in labels])
+    lines += table(heads, body)
+    first = next(iter(results.values()))[0]
+    lines += ["", f"Device memory per env (state, buffers, two output sets): {first['bytes per env']:.0f} B at the first "
+              f"id. Launches: " + ("prepared once (builder.PreparedLaunch)." if first["prepared"]
+                                   else "through numba's dispatcher (the prepared path failed here).")]
+    if var_rows:
+        lines += ["", "The step's kernels alone built other ways, same state and actions (env-steps/s):", "",
+                  *table(["id", "N", "window", "rare", f"split, fast kernel capped at {FAST_MAX_REGISTERS} (the default)"]
+                         + [variant_label(o) for o in VARIANTS], var_rows)]
+    lines += ["", "Targets (steady windows):"]
+    for env_id in dict.fromkeys(k[0] for k in results):
+        steady = [(r["env.step"], n, r) for (i, n), rows in results.items() if i == env_id for r in rows
+                  if r["window"] == "steady"]
+        if not steady:
+            continue
+        best, n_best, r = max(steady, key=lambda v: v[0])
+        goal = TARGETS.get(env_id)
+        lines.append(f"- {env_id}: best steady env.step {best:,.0f} env-steps/s at N = {n_best:,}"
+                     + (f" (target {goal:.0e}: {'met' if best >= goal else 'not met'})" if goal else "")
+                     + "; env.step / kernels alone, steady: "
+                     + ", ".join(f"{r['env.step'] / r['kernels alone']:.2f} at {n:,}"
+                                 for _, n, r in sorted(steady, key=lambda v: v[1]))
+                     + " (target 0.8)")
+        at4096 = [v for v in steady if v[1] == 4096]
+        if at4096:
+            lines.append(f"  at N = 4,096, steady: {at4096[0][0]:,.0f} (target 1.2e7: "
+                         f"{'met' if at4096[0][0] >= 1.2e7 else 'not met'})")
+    return lines
+
+
+def table(headers, rows):
+    from studies.common import table as t
+    return t(headers, rows)
 
 
 def main(argv: list[str] | None = None) -> int:
-    from studies.common import header, report_path, table, write
+    from studies.common import report_path, write
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="small sizes and few steps (a smoke run)")
+    ap.add_argument("--quick", action="store_true", help="tiny N and windows under numba's CUDA simulator where there "
+                    "is no GPU (a smoke run: the tests)")
     ap.add_argument("--out", default=None, help="report path (default runs/reports/throughput_gpu.md; "
                     "docs/throughput_gpu.md for the committed report)")
-    ap.add_argument("--env-id", default=ENV_ID)
+    ap.add_argument("--ids", nargs="+", default=None, help=f"env ids (default {' '.join(IDS)})")
     ap.add_argument("--sizes", nargs="+", type=int, default=None, help=f"numbers of envs (default {SIZES})")
+    ap.add_argument("--window", type=int, default=None, help=f"steps per window (default {WINDOW})")
+    ap.add_argument("--steady-after", type=int, default=None,
+                    help=f"random steps before the steady window (default {STEADY_AFTER}; at least 300 but with --quick)")
     ap.add_argument("--variants", action="store_true", help="also time the other ways to build the step's kernels")
-    ap.add_argument("--variant-sizes", nargs="+", type=int, default=[65536, 1_048_576],
-                    help="the N at which --variants times them (default 65536 1048576)")
+    ap.add_argument("--variant-sizes", nargs="+", type=int, default=[1_048_576],
+                    help="the N at which --variants times them (default 1048576)")
+    ap.add_argument("--variant-ids", nargs="+", default=None, help="the ids --variants times (default: the first)")
     ap.add_argument("--no-cpu", action="store_true", help="skip the CPU backend's column")
+    ap.add_argument("--cpu-sizes", nargs="+", type=int, default=None, help="the N of the CPU column (default: all)")
+    ap.add_argument("--ppo-sizes", nargs="+", type=int, default=[4096, 65536, 1_048_576],
+                    help="the N of the env + PPO column (default 4096 65536 1048576)")
     a = ap.parse_args(argv)
-    sizes = a.sizes or ((256, 4096) if a.quick else SIZES)
-    if any(n < 1 for n in sizes):
-        ap.error(f"--sizes must be positive, got {sizes}")
     name = gpu_here()
-    if name is None:
+    if name is None and a.quick and not simulated():
+        # (numba reads NUMBA_ENABLE_CUDASIM when it is first imported: a fresh process under the simulator)
+        env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+        return subprocess.run([sys.executable, "-m", "devtools.throughput_gpu", *argv], env=env).returncode
+    sim = name is None and simulated() and a.quick
+    if name is None and not sim:
         print("throughput_gpu: no CUDA GPU here (numba-cuda and torch see no device; the CUDA simulator does not "
-              "count): nothing measured, no report written. The GPU backend is built and tested in simulation "
-              "(tests/backends/test_cuda.py).")
+              "count): nothing measured, no report written. --quick runs the table under the simulator.")
         return 0
-    from penny_env.backends.env import FAST_MAX_REGISTERS
-    rows, var_rows, best = [], [], (0.0, 0)
-    for n in sizes:
-        steps = 20 if a.quick else max(20, min(400, 2**26 // n))
-        r = rates(a.env_id, n, steps)
-        c = float("nan") if a.no_cpu else cpu_rate(a.env_id, n, max(2, min(steps, 2**21 // n)))
-        best = max(best, (r["env.step"], n))
-        rows.append([f"{n:,}", f"{r['env.step']:,.0f}", f"{r['kernels alone']:,.0f}", f"{r['graph replay']:,.0f}",
-                     f"{r['env.step'] / r['kernels alone']:.2f}", f"{c:,.0f}", f"{r['env.step'] / c:.1f}x",
-                     f"{r['bytes per env']:.0f} B"])
-        prepared = r["prepared"]
-        print("  ".join(rows[-1]) + f"  (prepared launches: {prepared})", flush=True)
-        if a.variants and (n in a.variant_sizes or a.quick):
-            v = [f"{n:,}", f"{r['kernels alone']:,.0f}"]
-            for opts in VARIANTS:
-                v.append(f"{kernel_rate(a.env_id, n, steps, **opts):,.0f}")
-            var_rows.append(v)
-            print("  variants: " + "  ".join(v), flush=True)
-    lines = header("GPU throughput of the vector env", "devtools.throughput_gpu", argv)
-    lines += [f"- device: {name}; CPU backend on {os.cpu_count()} cores of the same machine", "",
-              f"{a.env_id}, random actions drawn on the device beforehand (float32), torch outputs; env-steps per "
-              "second. Kernels alone: the step's prepared launches in a loop (no action copy, no outputs); graph "
-              "replay: the step captured in a CUDA graph (backends/cuda_env.CudaGraphStep).", "",
-              *table(["N", "env.step", "kernels alone", "graph replay", "env.step / kernels", "CPU (numba, all cores)",
-                      "env.step / CPU", "device memory per env"], rows), "",
-              "Launches: " + ("prepared once (builder.PreparedLaunch)" if prepared
-                              else "through numba dispatcher (the prepared path failed here)") + ".", "",
-              f"Best env.step: {best[0]:,.0f} env-steps/s at N = {best[1]:,} (targets: at least 1e9 at the best N, "
-              "0.8 of the kernels alone at N >= 65,536, 1.2e7 at N = 4096)."]
-    if var_rows:
-        heads = ["N", f"split, fast kernel capped at {FAST_MAX_REGISTERS} registers (the default)"] + [
-            "one kernel" if o["kernels"] == "one" else
-            f"split, {'no cap' if o['max_registers'] is None else str(o['max_registers']) + ' registers'}" for o in VARIANTS]
-        lines += ["", "The step's kernels alone, built other ways (env-steps/s):", "", *table(heads, var_rows)]
+    if sim:
+        name = "numba's CUDA simulator (no GPU)"
+    ids = a.ids or (list(IDS[:1]) + [IDS[2]] if a.quick else list(IDS))
+    sizes = a.sizes or ([6] if a.quick else list(SIZES))
+    window = a.window or (3 if a.quick else WINDOW)
+    a.window = window
+    a.steady_after = a.steady_after if a.steady_after is not None else (4 if a.quick else STEADY_AFTER)
+    if a.steady_after < 300 and not a.quick:
+        ap.error("--steady-after must be at least 300 (the steady window)")
+    if any(n < 1 for n in sizes) or window < 1:
+        ap.error("--sizes and --window must be positive")
+    device = Device(sim)
+    variant_ids = a.variant_ids or ids[:1]
     path = report_path(a.out, a.quick, "throughput_gpu.md")
-    write(str(path), lines)
+    results = {}
+    for env_id in ids:
+        for n in sizes:
+            variants = VARIANTS if a.variants and env_id in variant_ids and (n in a.variant_sizes or a.quick) else ()
+            cpu = not a.no_cpu and (a.cpu_sizes is None or n in a.cpu_sizes)
+            ppo = device.torch is not None and (a.quick or n in a.ppo_sizes)
+            rows = columns(env_id, n, window, a.steady_after, device, cpu, ppo, variants)
+            results[(env_id, n)] = rows
+            for r in rows:
+                print(f"{env_id} N={n:,} {r['text']}: rare {100 * r['rare']:.2f} %, "
+                      + ", ".join(f"{k} {v:,.0f}" for k, v in r.items() if isinstance(v, float) and k != "rare"
+                                  and k != "bytes per env"), flush=True)
+            write(str(path), report(a, argv, name, results, sim))  # (after every row: a time limit keeps the rows done)
     print(f"wrote {path}")
     return 0
 

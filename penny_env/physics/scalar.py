@@ -279,23 +279,32 @@ def end_search_step_curved(end, c, sn, W, w, sigma, acc1, acc2, m, M, K, V2, rem
 
 
 def period_is_free(s, c, sn, acc1, acc2, dt, m):
-    """The certificate of an impact-free period: the first step of the impact search from t = 0 finds no end
-    touching the wall and certifies the whole period [0, dt], so the period has no impact and its motion is
-    one flow. c, sn = math.cos, math.sin of the heading s[3] (which the envs keep from the previous step)."""
+    """The certificate of an impact-free period: the first step of the impact search (:func:`first_impact_search`)
+    from t = 0 finds no end touching the wall and certifies the whole period [0, dt], so the period has no impact
+    and its motion is one flow. It is that first step itself, curvature refinement included (the same bounds and
+    formulas, so the same decision): where it fails the search does not finish at its first step either, and
+    where it passes the event loop would have found no impact and flowed over [0, dt] (the same flow, bitwise).
+    The refinement (a Hessian at the end, :func:`end_search_step_curved`) is evaluated only for an end whose
+    plain step falls short of dt, and only where the search refines it. c, sn = math.cos, math.sin of the
+    heading s[3] (which the envs keep from the previous step)."""
     R = m.R
     delta = m.delta
     x, y, _, _, W, w = s
-    M = acceleration_bound(W, W + acc2 * dt, w, w + acc1 * dt, acc1, acc2, R, m.G, m.L, SCALAR)
-    RW = R * W
-    tau = math.inf
-    for sR in (R, -R):
-        g, hx, hy = wall_terms(m, x + sR * c, y + sR * sn)
-        sRw = sR * w
-        gd = hx * (RW * c - sRw * sn) + hy * (RW * sn + sRw * c)
-        if g >= -delta and gd > 0.0:
-            return False
-        tau = min(tau, search_step(g, gd, M, delta, SCALAR))
-    return not tau < dt
+    V2, A, J = motion_bounds(W, W + acc2 * dt, w, w + acc1 * dt, acc1, acc2, R, SCALAR)
+    M, K = curvature_bounds(V2, A, J, m.G, m.L, m.D3, SCALAR)
+    ef = end_search_step(x, y, c, sn, W, w, 1.0, m, M)
+    if ef[0] >= -delta and ef[1] > 0.0:
+        return False
+    eb = end_search_step(x, y, c, sn, W, w, -1.0, m, M)
+    if eb[0] >= -delta and eb[1] > 0.0:
+        return False
+    # (each end's best step >= dt  <=>  the search's first step, min over ends of the best steps, reaches dt)
+    free = not ef[2] < dt and not eb[2] < dt
+    if not free and m.third:
+        free = not (ef[2] < dt and end_search_step_curved(ef, c, sn, W, w, 1.0, acc1, acc2, m, M, K, V2, dt) < dt)
+        if free:
+            free = not (eb[2] < dt and end_search_step_curved(eb, c, sn, W, w, -1.0, acc1, acc2, m, M, K, V2, dt) < dt)
+    return free
 
 
 def first_impact_search(s0, acc1, acc2, horizon, m):
