@@ -194,10 +194,17 @@ def make_demos(runs, cell, pairs: int) -> Path:
             env = gym.make(env_id, **overrides)
             env.reset(seed=DEMO_SEED + j)
             states, target = [env.unwrapped.state.copy()], env.unwrapped.target.copy()
-            for a in pr.actions:
-                env.step(np.asarray(a, dtype=np.float32))
+            for t, a in enumerate(pr.actions):
+                # float64, as the witness played them (a float32 cast changes the torques' last bits, and on a
+                # chaotic table the episode)
+                _, _, term, trunc, info = env.step(np.asarray(a, dtype=np.float64))
                 states.append(env.unwrapped.state.copy())
+                if term or trunc:
+                    break
             env.close()
+            if not (t == len(pr.actions) - 1 and term and info["is_success"]):
+                raise RuntimeError(f"{cell} seed {DEMO_SEED + j}: the witness episode did not replay to its success "
+                                   f"(ended at action {t + 1} of {len(pr.actions)})")
             episodes.append((np.array(states), target, np.array(pr.actions)))
     finally:
         w.close()
