@@ -128,6 +128,8 @@ class Device:
 
 def make(env_id, n, device: Device, **cuda_options):
     import gymnasium as gym
+
+    import penny_env  # noqa: F401 (registers the ids)
     return gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", backend="cuda",
                         outputs=device.outputs, cuda_options=cuda_options or None).unwrapped
 

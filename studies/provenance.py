@@ -128,7 +128,8 @@ REPORTS = {
                               + _ENV + _PHYSICS
                               + _TABLES),
     "docs/ladder.md": ("python -m studies.ladder",
-                       ("studies/ladder.py", "studies/cells.py", "configs/ladder/cpu.yaml", "training/protocol.py",
+                       ("studies/ladder.py", "studies/cells.py", "configs/ladder/cpu.yaml", "configs/ladder/session.yaml",
+                        "training/protocol.py", "training/agent_side.py",
                         "training/ppo_torch.py", "training/ppo_heading.py", "training/ppo_rnd.py", "training/her_sac.py",
                         "training/start_curriculum.py", "training/go_explore.py", "penny_env/envs/vector_env.py")
                        + _ENV + _PHYSICS + _TABLES),

@@ -133,7 +133,13 @@ def test_a_num_envs_beyond_the_address_space_limit_is_refused_up_front(monkeypat
 def test_the_memory_estimate_matches_what_the_env_allocates(scene, task, K):
     # tracemalloc (numpy reports its buffers) over construction, a reset and steps, per env, against the estimate
     n = 20000
-    pe.PennyVectorEnv(8, scene, task, max_impacts_in_info=K)  # (compiled code, caches: outside the measure)
+    # compiled code and caches outside the measure: the same size's loops (the parallel ones above SERIAL_BELOW) run
+    # once first, so that no compile (its Python objects) falls inside it whatever ran before in the process
+    warm = pe.PennyVectorEnv(n, scene, task, max_impacts_in_info=K)
+    warm.reset(seed=1)
+    warm.step(np.full((n, 2), 0.5))
+    warm.close()
+    del warm
     tracemalloc.start()
     try:
         env = pe.PennyVectorEnv(n, scene, task, max_impacts_in_info=K)

@@ -179,8 +179,9 @@ def test_draws_equal_the_numpy_implementation_they_replaced():
                 v.reset(seed=[123 + i for i in range(n)])
                 for _ in range(episode):
                     v.reset()
-            assert np.array_equal(v._st.S, S), env_id
-            assert np.array_equal(v._st.target, target) and np.array_equal(v._st.arc, arc), env_id
+            host = v._runner.state_to_host()
+            assert np.array_equal(host.S, S), env_id
+            assert np.array_equal(host.target, target) and np.array_equal(host.arc, arc), env_id
 
 
 @needs_numba

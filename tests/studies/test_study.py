@@ -10,6 +10,8 @@ pytest.importorskip("stable_baselines3", reason="the study trains SB3 agents")
 pytest.importorskip("torch", reason="SB3 needs torch")
 
 from studies import study  # noqa: E402
+from studies import jobs as jobs_module  # noqa: E402
+from studies.jobs import finished  # noqa: E402
 from training.evaluate import wilson_interval  # noqa: E402
 
 QUICK = study.QUICK_CONFIG.read_text()
@@ -216,8 +218,8 @@ def test_gif_success_shows_the_first_successful_episode(quick_pool, tmp_path, mo
 def test_failed_jobs_are_named():
     jobs = [{"cell": "PennyProbeDrive-Plane-v0", "agent": "ppo", "seed": 3}]
     with pytest.raises(RuntimeError, match="PennyProbeDrive-Plane-v0 ppo seed 3: ValueError: boom"):
-        study._raise_failed(["0: ValueError: boom"], jobs)
-    study._raise_failed([], jobs)  # nothing failed: no error
+        jobs_module._raise_failed(["0: ValueError: boom"], jobs)
+    jobs_module._raise_failed([], jobs)  # nothing failed: no error
 
 
 def test_readme_says_what_the_report_computes_of_the_curves():
@@ -250,14 +252,14 @@ def test_a_result_of_another_config_is_stale(tmp_path):
     job = {"cell": "PennyProbeDrive-Plane-v0", "agent": "ppo", "seed": 0, "eval_episodes": 4, "timesteps": 1024,
            "num_envs": 8, "hyperparameters": {"n_steps": 64, "policy_kwargs": {"net_arch": [32, 32]}},
            "curve_points": 2, "curve_episodes": 8}
-    assert not study.finished(tmp_path, job)
+    assert not finished(tmp_path, job, study.job_dir)
     study.job_dir(tmp_path, job).mkdir(parents=True)
-    study._finish(tmp_path, {"job": job, "episodes": {}, "curve": [], "seconds": 0.0})
-    assert study.finished(tmp_path, job)  # the JSON round trip keeps it equal
-    assert not study.finished(tmp_path, dict(job, timesteps=2048))
-    assert not study.finished(tmp_path, dict(job, hyperparameters={"n_steps": 128}))
+    jobs_module._finish(tmp_path, {"job": job, "episodes": {}, "curve": [], "seconds": 0.0}, study.job_dir)
+    assert finished(tmp_path, job, study.job_dir)  # the JSON round trip keeps it equal
+    assert not finished(tmp_path, dict(job, timesteps=2048), study.job_dir)
+    assert not finished(tmp_path, dict(job, hyperparameters={"n_steps": 128}), study.job_dir)
     (study.job_dir(tmp_path, job) / "result.json").write_text("{not json")
-    assert not study.finished(tmp_path, job)
+    assert not finished(tmp_path, job, study.job_dir)
 
 
 def test_training_leaves_the_job_config_as_it_was(tmp_path):
