@@ -107,6 +107,8 @@ def main(argv=None) -> None:
     ap.add_argument("--shapes", nargs="+", choices=list(SHAPES), help="shapes (default: all)")
     ap.add_argument("--entries", nargs="+", choices=ENTRIES, help="entry points (default: all)")
     args = ap.parse_args(argv)
+    from studies.common import refuse_quick_into_docs
+    refuse_quick_into_docs(args.out, args.quick)
     shapes = ["Plane"] if args.quick else (args.shapes or list(SHAPES))
     entries = ["single"] if args.quick else (args.entries or list(ENTRIES))
     command = "python -m devtools.compile_time " + shlex.join(argv if argv is not None else sys.argv[1:])

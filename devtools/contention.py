@@ -152,6 +152,8 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--setups", nargs="+", choices=list(SETUPS), help="setups (default: all available)")
     args = ap.parse_args(argv)
+    from studies.common import refuse_quick_into_docs
+    refuse_quick_into_docs(args.out, args.quick)
     if args.quick:
         n, steps, repeats, setups = 64, 20, 1, ["penny_env default", "1 thread"]
     else:

@@ -196,6 +196,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    from studies.common import refuse_quick_into_docs
+    refuse_quick_into_docs(a.out, a.quick)
     if a.quick:
         a.n, a.fresh, a.warmup, a.steps = min(a.n, 64), 5, 300 if a.warmup >= 300 else a.warmup, 10
     a.ids = a.ids or list(QUICK_IDS if a.quick else IDS)

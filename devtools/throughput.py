@@ -128,6 +128,8 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--readme", default=None, help="also replace the block between <!-- throughput:start --> and "
                                                     "<!-- throughput:end --> in this file (README.md) with the tables")
     args = ap.parse_args(argv)
+    from studies.common import refuse_quick_into_docs
+    refuse_quick_into_docs(args.out, args.quick)
     quick = args.quick
     if quick and args.readme:
         ap.error("--readme writes the README's throughput table: it takes a full run, not --quick")

@@ -165,6 +165,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="fewer repeats")
     ap.add_argument("--out", default=None, help="write a Markdown report here (e.g. docs/bench_solvers.md)")
     args = ap.parse_args(argv)
+    from studies.common import refuse_quick_into_docs
+    refuse_quick_into_docs(args.out, args.quick)
     rows = run(quick=args.quick)
     lines = report(rows, argv)
     lines += ["", "## One impact at a time", "",

@@ -125,6 +125,16 @@ def table(headers: list[str], rows: list[list]) -> list[str]:
     return out
 
 
+def refuse_quick_into_docs(out, quick: bool) -> None:
+    """A --quick run's numbers are a smoke test's: they never replace a committed report (docs/ or the README)."""
+    if not quick or out is None:
+        return
+    root = Path(__file__).resolve().parents[1]
+    path, docs = Path(out).resolve(), (root / "docs").resolve()
+    if path == docs or docs in path.parents or path == (root / "README.md").resolve():
+        raise SystemExit(f"--quick never writes into docs/ or the README (the committed reports): --out {out}")
+
+
 def report_path(out: str | None, quick: bool, name: str) -> Path:
     """Where a report command writes its Markdown file (its PNGs go next to it).
 
@@ -134,6 +144,7 @@ def report_path(out: str | None, quick: bool, name: str) -> Path:
     under the working directory (``runs/`` is git-ignored): a run never rewrites a tracked file unless
     asked to."""
     if out is not None:
+        refuse_quick_into_docs(out, quick)
         return Path(out).resolve()
     if quick:
         return Path(tempfile.mkdtemp(prefix="penny_env-quick-")) / name

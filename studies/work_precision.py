@@ -210,6 +210,8 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="Markdown report (e.g. docs/work_precision.md); PNGs go next to it")
     ap.add_argument("--all-scenes", action="store_true", help="also the restitution scene")
     args = ap.parse_args(argv)
+    from studies.common import refuse_quick_into_docs
+    refuse_quick_into_docs(args.out, args.quick)
     t0 = time.perf_counter()
     scs, results = run(quick=args.quick, all_scenes=args.all_scenes)
     for r in results:

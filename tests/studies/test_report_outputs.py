@@ -2,6 +2,7 @@
 committed reports (docs/) or the README: without --out a quick run writes into a temporary directory."""
 import importlib
 import importlib.util
+import os
 import re
 import tempfile
 from pathlib import Path
@@ -65,3 +66,17 @@ def test_throughput_quick_refuses_to_write_the_readme(reports_untouched):
     with pytest.raises(SystemExit):
         throughput.main(["--quick", "--readme", str(readme)])
     assert readme.read_text() == "<!-- throughput:start -->\n<!-- throughput:end -->\n"
+
+
+@pytest.mark.parametrize("module", ["devtools.compile_time", "devtools.contention", "devtools.rare_share",
+                                    "devtools.throughput", "devtools.throughput_compare", "devtools.throughput_gpu",
+                                    "studies.bench_solvers", "studies.work_precision", "studies.dynamics"])
+def test_quick_never_overwrites_a_committed_report(module):
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[2]
+    target = root / "docs" / "quick_must_not_exist.md"
+    r = subprocess.run([sys.executable, "-m", module, "--quick", "--out", str(target)], cwd=root, capture_output=True,
+                       text=True, timeout=600, env=dict(os.environ, PYTHONPATH=str(root), NUMBA_ENABLE_CUDASIM="1"))
+    assert r.returncode != 0 and "never writes into docs/" in r.stderr, (r.stdout[-500:], r.stderr[-1500:])
+    assert not target.exists()
