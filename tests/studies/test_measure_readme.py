@@ -109,7 +109,7 @@ def test_readme_sentences_come_from_the_measurement(tmp_path):
     readme = (ROOT / "README.md").read_text()
     main = measure_readme.readme_sentence("main", _fake_part("main", readme), readme)
     assert main.startswith("Cost: ") and "AMD EPYC (2 logical cores), 2026-11-26" in main
-    assert "12 connection retries to download.pytorch.org" in main
+    assert "could not reach download.pytorch.org" in main and "after 12 connection retries" in main
     assert "for `studies.paper_figures`" in main and "for `training.train`" in main
     tests = measure_readme.readme_sentence("tests", _fake_part("tests", readme, 300.0, {"passed": 5, "skipped": 1}),
                                            readme)
