@@ -16,16 +16,17 @@ def compiling(collect=True):
     cycles) is collected inside the block. A KeyboardInterrupt inside numba's compiler, or inside an llvmlite
     object's finalizer run by a later collection in the middle of a step, corrupted LLVM's state: the process
     aborted ("double free detected"). In a thread other than the main one (where Python delivers signals) the
-    block only collects. collect: False, no collection (an import); a function, collect where it says so (a
-    warm-up that may have found everything compiled already)."""
+    block only collects. A handler of the user's own (a training loop's that saves a checkpoint, say) is held
+    the same way and called once, after the block, with the first held signal. collect: False, no collection (an
+    import); a function, collect where it says so (a warm-up that may have found everything compiled already)."""
     import gc
     import signal
     import threading
     held = []
     main = threading.current_thread() is threading.main_thread()
     previous = signal.getsignal(signal.SIGINT) if main else None
-    if main and previous is signal.default_int_handler:
-        signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    if main and callable(previous):  # (Python's default_int_handler or the user's; not SIG_IGN, SIG_DFL or None)
+        signal.signal(signal.SIGINT, lambda signum, frame: held.append((signum, frame)))
     else:
         main = False
     try:
@@ -36,7 +37,7 @@ def compiling(collect=True):
         if main:
             signal.signal(signal.SIGINT, previous)
     if held:
-        raise KeyboardInterrupt
+        previous(*held[0])  # (default_int_handler raises KeyboardInterrupt)
 
 
 def load_numba() -> None:

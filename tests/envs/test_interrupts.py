@@ -27,3 +27,25 @@ def test_a_storm_of_interrupts_leaves_the_process_and_the_envs_whole(what, steps
     assert out["interrupts"] > 0, out  # (the storm reached the work)
     assert out["errors"] == [], out["errors"][:5]
     assert out["same_after_reset"], out
+
+
+def test_a_handler_of_the_users_own_is_held_through_a_compile_and_called_once_after():
+    """A training loop's own SIGINT handler (one that saves a checkpoint and raises, say) met a compile as Python's
+    default one did; it is held the same way and called once, after the block, with the signal."""
+    import signal
+
+    from penny_env.backends.interrupts import compiling
+    calls = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: calls.append(signum))
+    try:
+        with compiling(collect=False):
+            for _ in range(3):
+                os.kill(os.getpid(), signal.SIGINT)
+                sum(range(10000))  # (Python runs a handler between bytecodes)
+            assert calls == []
+        assert calls == [signal.SIGINT]
+        os.kill(os.getpid(), signal.SIGINT)
+        sum(range(10000))
+        assert calls == [signal.SIGINT] * 2  # (restored after the block)
+    finally:
+        signal.signal(signal.SIGINT, previous)
