@@ -45,6 +45,11 @@ the learning rate anneals linearly to 0 over the budget.
 PPO: CleanRL's ppo_continuous_action (clipped objective, GAE, advantages normalised per minibatch, separate
 tanh MLPs), NEXT_STEP autoreset with the reset transitions masked as in training/ppo_torch.py.
 
+Early stopping on validation (``keep_best``, with ``val_every``): PPO's success rose and then fell on both seeds of
+the stadium (train success 0.50 at 5.7e7 env steps, 0.18 at 1e8: the ladder's run of 2026-11-27); the policy handed
+to each checkpoint is the one with the best success so far on the validation seeds (VAL_SEED.., never the
+evaluation's), a snapshot taken when it was validated.
+
 Protocol (training/protocol.py): ``Args``, ``train(args, checkpoints, on_checkpoint, log)`` and
 :class:`HeadingPolicy` (deterministic: the mean heading/speed; its own clock and impact counter, reset by
 ``reset(num_envs)``). Seeds: training envs ``TRAIN_SEED + 100_000 seed`` (+ sub-env index), validation
@@ -66,7 +71,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn as nn
-from training.protocol import fair_reward_kwargs
+from training.protocol import evaluate, fair_reward_kwargs
 
 # -- hyperparameters ------------------------------------------------------------------------------------
 TRAIN_SEED, VAL_SEED = 10_000_000, 50_000
@@ -106,6 +111,7 @@ class Args:
     v_flat: float = 0.5  # park potential: speeds under this x speed_tolerance count as 0
     desync: bool = True
     val_every: int = 0  # env steps between validation evaluations (0: none)
+    keep_best: bool = True  # with val_every: the policy handed out is the best-validated so far (early stopping)
     val_episodes: int = 200
     quick: bool = False
 
@@ -300,7 +306,6 @@ def make_env(env_id, num_envs, kwargs):
 
 def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     """Train for args.total_timesteps env steps (training/protocol.py); returns the results dict."""
-    from training.protocol import evaluate
     if args.quick:
         args = quick_args(args)
     torch.set_num_threads(args.torch_threads)
@@ -344,8 +349,11 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     if progress:
         progress.write("global_step,wall_s,train_success,val_success,steps_per_s,std,approx_kl,minibatches\n")
 
+    best = {"val": -1.0, "agent": None}  # keep_best: the best-validated snapshot so far
+
     def policy():
-        return HeadingPolicy(agent, k)
+        """The current policy, or with keep_best the best-validated one so far (a snapshot: training goes on)."""
+        return HeadingPolicy(best["agent"] if args.keep_best and best["agent"] is not None else agent, k)
 
     for it in range(1, iterations + 1):
         if args.anneal_lr:
@@ -437,9 +445,12 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
         if val_next is not None and (global_step >= val_next or it == iterations):
             while val_next <= global_step:
                 val_next += args.val_every
-            ev = evaluate(policy(), args.env_id, args.env_kwargs, range(VAL_SEED, VAL_SEED + args.val_episodes))
+            ev = evaluate(HeadingPolicy(agent, k), args.env_id, args.env_kwargs,
+                          range(VAL_SEED, VAL_SEED + args.val_episodes))
             val = ev["successes"] / ev["episodes"]
             curve.append((global_step, val))
+            if val >= best["val"]:  # (ties: the later, longer-trained policy)
+                best.update(val=val, agent=copy.deepcopy(agent))
             if log:
                 log(f"[ppo_heading] {global_step:,} steps, {global_step / wall:,.0f} steps/s, train success "
                     f"{train_success:.3f}, validation {val:.3f}, std {stats['std']:.3f}, kl {stats['approx_kl']:.4f}, "
@@ -463,9 +474,12 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
         on_checkpoint(global_step, policy())
     results = {"env_id": args.env_id, "env_kwargs": args.env_kwargs, "seed": args.seed, "env_steps": global_step,
                "wall_time_s": wall, "steps_per_s": global_step / wall, "env_time_s": t_env, "update_time_s": t_upd,
-               "train_success": train_success, "val_curve": curve, "heads": list(k.heads), **stats}
+               "train_success": train_success, "val_curve": curve, "heads": list(k.heads),
+               "best_val": best["val"] if best["agent"] is not None else None, **stats}
     if out is not None:
         torch.save(agent.state_dict(), out / "model.pt")
+        if best["agent"] is not None:
+            torch.save(best["agent"].state_dict(), out / "best_model.pt")
         (out / "results.json").write_text(json.dumps(results, indent=2))
     if log:
         log(f"[ppo_heading] {global_step:,} steps in {wall:.0f} s ({global_step / wall:,.0f} steps/s; env {t_env:.0f} s,"

@@ -126,3 +126,20 @@ def test_ppo_speed_quick_refuses_docs(capsys):
     with pytest.raises(SystemExit):
         ppo_speed.main(["--quick", "--out", str(ppo_speed.ROOT / "docs" / "ppo_speed_quick.md")])
     assert not (ppo_speed.ROOT / "docs" / "ppo_speed_quick.md").exists()
+
+
+def test_ppo_heading_hands_out_the_best_validated_snapshot(tmp_path, monkeypatch):
+    """keep_best: each checkpoint gets the policy with the best validation success so far, frozen when validated."""
+    scores = iter([0.5, 0.25, 0.75])  # the validations' success rates, in order
+    monkeypatch.setattr(ppo_heading, "evaluate", lambda *a, **k: {"successes": int(100 * next(scores)),
+                                                                  "episodes": 100})
+    calls = []
+    args = _args("ppo_heading", STADIUM, tmp_path, val_every=128, val_episodes=4)
+    res = ppo_heading.train(args, checkpoints=[128, 256, 384], log=None,
+                            on_checkpoint=lambda steps, policy: calls.append(policy))
+    assert res["best_val"] == 0.75 and [v for _, v in res["val_curve"]] == [0.5, 0.25, 0.75]
+    def same(a, b):
+        return all(torch.equal(x, y) for x, y in zip(a.values(), b.values()))
+    first, second, last = (p.agent.state_dict() for p in calls)
+    assert same(second, first)  # (0.25 < 0.5: the first snapshot is still the best)
+    assert not same(last, first) and same(last, torch.load(tmp_path / "ppo_heading" / "best_model.pt"))
