@@ -106,7 +106,7 @@ def measure(env_id: str, n: int, fresh: int, warmup: int, steps: int, model_dir=
         a = policy(obs)
         name = next((k for k, (lo, hi) in windows.items() if lo <= t < hi), None)
         if name is not None:
-            st = u._runner.st
+            st = u._runner.st if hasattr(u, "_runner") else u._st  # (this tree's runner; the state itself before it)
             pending = st.pending.copy()
             if certify is not None:
                 acc1, acc2 = torques(a, p)
