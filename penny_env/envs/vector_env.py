@@ -8,6 +8,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..backends import threads
 from ..backends.cache import announce_compile
 from ..backends.interrupts import load_numba
 from ..backends.choice import compiles
@@ -214,8 +215,13 @@ class PennyVectorEnv(VectorEnv):
         self._runner = CpuRunner(self._fns, self._consts, self._p, n, K, core.obs_dim, core.n_act, core.counts_arc,
                                  core.audit)
         if core.backend == "numba":  # the machine code loaded (or compiled) now, not inside a step or a reset
+            # the dispatcher this env's steps will run: the serial one below SERIAL_BELOW envs (or in a forked
+            # child), else the parallel one (announcing the parallel one for a small env said "compiling" in every
+            # process: it is never built there, so it never has a cache)
+            step = self._fns.step_envs
+            serial = step.serial is not None and (threads.serial_now() or n < threads.SERIAL_BELOW)
             announce_compile("vector env step", "open plane" if core.table is None else type(core.table).__name__,
-                             self._m.kind, self._fns.step_envs.__wrapped__)
+                             self._m.kind, step.serial() if serial else step.__wrapped__)
             self._runner.warm_up()  # (its loops' first calls hold Ctrl-C while they compile: threads.locked)
         return core
 
