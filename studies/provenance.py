@@ -140,6 +140,10 @@ REPORTS = {
     # module makes it stale
     "docs/throughput_compare.md": ("python -m devtools.throughput_compare --before OLD --after NEW "
                                    "--out docs/throughput_compare.md", ("devtools/throughput_compare.py",)),
+    # the rare path's share: this tree's certificate beside another tree's (OLD); its numbers come from the step
+    "docs/rare_share.md": ("python -m devtools.rare_share --train-policies runs/rare_share_policies --before OLD "
+                           "--out docs/rare_share.md",
+                           ("devtools/rare_share.py", "training/ppo_torch.py") + _ENV + _PHYSICS + _TABLES),
     "docs/throughput_compare_busy.md": ("python -m devtools.throughput_compare --busy --before OLD --after NEW "
                                         "--out docs/throughput_compare_busy.md",
                                         ("devtools/throughput_compare.py",)),
@@ -157,6 +161,7 @@ MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "studies.optimal_control": "docs/optimal_control_central.md",
                   "studies.impact_oc": "docs/optimal_control.md",
                   "devtools.throughput_compare": "docs/throughput_compare.md",
+                  "devtools.rare_share": "docs/rare_share.md",
                   "studies.billiards": "docs/billiards.md",
                   "studies.billiards_answer": "docs/billiards_answer.md",
                   "studies.witness_study": "docs/witnesses.md",
