@@ -4,7 +4,7 @@ its stored state, explore from it, then robustify a policy from the archive's su
 backward start-state curriculum of training/start_curriculum.py.
 
     python -m training.go_explore --env-id PennyProbeSteer-Stadium-Elastic-v0 [--total-timesteps 5e6] [--seed 0]
-                                  [--set FIELD=VALUE ...] [--out DIR]
+                                  [--set FIELD=VALUE ...] [--hp NAME=VALUE ...] [--quick] [--eval] [--out DIR]
 
 **Privileged, in training only.** The exploration phase reads the env's state and target (the cells are made of
 them) and resets envs to stored states (``PennyVectorEnv.reset(options={"state", "target", "reset_mask"})``): the
@@ -32,13 +32,10 @@ robustify with start_curriculum's defaults.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -300,27 +297,15 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     return res
 
 
+def quick_args(args: Args) -> Args:
+    """--quick: seconds on a few envs (checks the pipeline, learns nothing)."""
+    return dataclasses.replace(args, num_envs=16, pairs=4, explore_steps=2048, total_timesteps=4096)
+
+
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m training.go_explore", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--env-id", default=Args.env_id)
-    ap.add_argument("--total-timesteps", type=float, default=Args.total_timesteps)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="Args fields (YAML values)")
-    ap.add_argument("--env", nargs="*", default=[], metavar="FIELD=VALUE", help="env field overrides (YAML values)")
-    ap.add_argument("--out", default=None)
-    a = ap.parse_args(argv)
-    import yaml
-    args = Args(env_id=a.env_id, total_timesteps=int(a.total_timesteps), seed=a.seed, out=a.out,
-                env_kwargs={kv.split("=", 1)[0]: yaml.safe_load(kv.split("=", 1)[1]) for kv in a.env})
-    args = dataclasses.replace(args, **{kv.split("=", 1)[0]: yaml.safe_load(kv.split("=", 1)[1]) for kv in a.set})
-    res = train(args, log=lambda s: print(s, flush=True))
-    state = res.pop("agent")
-    print(json.dumps(res, default=str), flush=True)
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        torch.save(state, out / "agent.pt")
-        (out / "results.json").write_text(json.dumps({**res, "args": dataclasses.asdict(args)}, default=str, indent=1))
+    """The command line every ladder agent shares (training.protocol.cli)."""
+    from training.protocol import cli
+    return cli("training.go_explore", Args, train, argv, quick_args)
 
 
 if __name__ == "__main__":

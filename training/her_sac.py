@@ -3,7 +3,7 @@ native vector env, in one torch file (SB3's SAC with HerReplayBuffer runs at a f
 slow for 1e6 steps; this one steps a few hundred envs at once and trains on large batches).
 
     python -m training.her_sac --env-id PennyProbeSteer-Stadium-Elastic-v0 --total-timesteps 1000000 [--seed 0]
-                               [--set FIELD=VALUE ...] [--out DIR]
+                               [--set FIELD=VALUE ...] [--hp NAME=VALUE ...] [--quick] [--eval] [--out DIR]
 
 **What it may use (no privileged information).** The env's observation, its terminated/truncated flags and
 ``info["impacts"]``, and the cell's published constants (training/agent_side.TaskConsts: R, the tolerances, L, the
@@ -40,14 +40,11 @@ steps per env (524k transitions), gamma 0.98, lr 3e-4, 1e6 env steps per seed.
 """
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
-import json
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -344,33 +341,16 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
             "validation_curve": curve, "actor": actor.state_dict()}
 
 
+def quick_args(args: Args) -> Args:
+    """--quick: seconds on a few envs (checks the pipeline, learns nothing)."""
+    return dataclasses.replace(args, num_envs=16, batch_size=64, hidden=32, learning_starts=256, buffer_per_env=64,
+                               total_timesteps=2048)
+
+
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m training.her_sac", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--env-id", default=Args.env_id)
-    ap.add_argument("--total-timesteps", type=float, default=Args.total_timesteps)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="Args fields (YAML values)")
-    ap.add_argument("--env", nargs="*", default=[], metavar="FIELD=VALUE", help="env field overrides (YAML values)")
-    ap.add_argument("--out", default=None)
-    a = ap.parse_args(argv)
-    import yaml
-    args = Args(env_id=a.env_id, total_timesteps=int(a.total_timesteps), seed=a.seed, out=a.out,
-                env_kwargs={kv.split("=", 1)[0]: yaml.safe_load(kv.split("=", 1)[1]) for kv in a.env})
-    args = dataclasses.replace(args, **{kv.split("=", 1)[0]: yaml.safe_load(kv.split("=", 1)[1]) for kv in a.set})
-    res = train(args, log=lambda s: print(s, flush=True))
-    actor_state = res.pop("actor")
-    vec = A.make_vec(args.env_id, 1, args.env_kwargs)
-    k = A.TaskConsts.of(vec)
-    actor = Actor(n_features(k), A.head_dim(k, args.head), args.hidden)
-    actor.load_state_dict(actor_state)
-    pol = make_policy(actor, k, args.head)
-    res["validation_final"] = A.validate(pol, args.env_id, args.env_kwargs, args.val_episodes, args.val_seed)
-    print(json.dumps({k_: v for k_, v in res.items()}, default=str), flush=True)
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        torch.save(actor_state, out / "actor.pt")
-        (out / "results.json").write_text(json.dumps({**res, "args": dataclasses.asdict(args)}, default=str, indent=1))
+    """The command line every ladder agent shares (training.protocol.cli)."""
+    from training.protocol import cli
+    return cli("training.her_sac", Args, train, argv, quick_args)
 
 
 if __name__ == "__main__":

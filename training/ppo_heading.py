@@ -57,13 +57,10 @@ Protocol (training/protocol.py): ``Args``, ``train(args, checkpoints, on_checkpo
 """
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
 import json
 import math
-import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -488,47 +485,10 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     return results
 
 
-def parse_args(argv=None) -> tuple[Args, argparse.Namespace]:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--env-id", default=Args.env_id)
-    ap.add_argument("--total-timesteps", type=float, default=Args.total_timesteps)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="env field overrides (YAML values)")
-    ap.add_argument("--hp", nargs="*", default=[], metavar="NAME=VALUE", help="hyperparameters of Args")
-    ap.add_argument("--eval", action="store_true", help="at the end, training/protocol.evaluate on seeds 0..199")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", default=None)
-    a = ap.parse_args(argv)
-    import yaml
-    kw = {s.split("=", 1)[0]: yaml.safe_load(s.split("=", 1)[1]) for s in a.set}
-    args = Args(env_id=a.env_id, env_kwargs=kw, seed=a.seed, total_timesteps=int(a.total_timesteps), out=a.out,
-                quick=a.quick)
-    types = {f.name: f.type for f in dataclasses.fields(Args)}
-    for item in a.hp:
-        name, value = item.split("=", 1)
-        if name not in types:
-            ap.error(f"--hp: no hyperparameter {name!r}")
-        value = yaml.safe_load(value)
-        current = getattr(args, name)
-        args = dataclasses.replace(args, **{name: type(current)(value) if current is not None else value})
-    return args, a
-
-
 def main(argv=None):
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-    args, a = parse_args(list(sys.argv[1:] if argv is None else argv))
-    res = train(args)
-    if a.eval:
-        from training.protocol import evaluate
-        ev = evaluate(res["policy"], args.env_id, args.env_kwargs)
-        res["eval"] = {k: ev[k] for k in ("successes", "episodes")}
-        print(f"[ppo_heading] evaluation (seeds 0..199, deterministic): {ev['successes']}/{ev['episodes']}")
-        if args.out:
-            path = Path(args.out) / "results.json"
-            data = json.loads(path.read_text())
-            data["eval"] = ev
-            path.write_text(json.dumps(data, indent=2))
-    return res
+    """The command line every ladder agent shares (training.protocol.cli)."""
+    from training.protocol import cli
+    return cli("training.ppo_heading", Args, train, argv, quick_args)
 
 
 if __name__ == "__main__":

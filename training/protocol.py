@@ -117,3 +117,81 @@ def load_demos(path) -> dict:
     """The arrays of :func:`save_demos`."""
     with np.load(path) as z:
         return {k: z[k] for k in z.files}
+
+
+def cli(prog: str, args_class, train, argv=None, quick_args=None) -> dict:
+    """The command line every ladder agent shares (``python -m training.<agent>``):
+
+        --env-id ID  --total-timesteps N  --seed K  --set FIELD=VALUE ...  --hp NAME=VALUE ...  [--demos NPZ]
+        [--quick] [--eval] [--out DIR]
+
+    ``--set``: the env's fields (YAML values, as ``gymnasium.make(id, **fields)``); ``--hp``: fields of the agent's
+    ``Args`` (YAML values, an unknown name refused); ``--quick``: the agent's ``quick_args`` (seconds; learns
+    nothing); ``--eval``: :func:`evaluate` of the final policy on the pair seeds 0..199. The env's numba threads
+    default to 1 (NUMBA_NUM_THREADS; ``--hp torch_threads=N`` sets torch's). With ``--out`` the results (and the
+    agent's state, where ``train`` returns it as ``agent``, ``actor`` or ``state``) are written there, in
+    ``results.json`` beside what ``train`` wrote itself. Returns ``train``'s dict, with ``eval`` after --eval."""
+    import argparse
+    import dataclasses
+    import json
+    import os
+    import sys
+    from pathlib import Path
+
+    import yaml
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    fields = {f.name for f in dataclasses.fields(args_class)}
+    ap = argparse.ArgumentParser(prog=f"python -m {prog}")
+    ap.add_argument("--env-id", default=args_class.env_id)
+    ap.add_argument("--total-timesteps", type=float, default=None, help="env steps (default: the agent's)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="env field overrides (YAML values)")
+    ap.add_argument("--hp", nargs="*", default=[], metavar="NAME=VALUE", help="fields of the agent's Args (YAML values)")
+    if "demos" in fields:
+        ap.add_argument("--demos", default=None, help="demonstrations (.npz of training.protocol.save_demos)")
+    ap.add_argument("--quick", action="store_true", help="a few seconds: checks the pipeline, learns nothing")
+    ap.add_argument("--eval", action="store_true", help="evaluate the final policy on the pair seeds 0..199")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args(list(sys.argv[1:] if argv is None else argv))
+
+    def pairs(items, flag):
+        out = {}
+        for item in items:
+            if "=" not in item:
+                ap.error(f"{flag}: expected NAME=VALUE, got {item!r}")
+            name, value = item.split("=", 1)
+            out[name] = yaml.safe_load(value)
+        return out
+    hp = pairs(a.hp, "--hp")
+    unknown = sorted(set(hp) - fields)
+    if unknown:
+        ap.error(f"--hp: {unknown} are not fields of {prog}.Args; fields: {sorted(fields)}")
+    given = {"env_id": a.env_id, "env_kwargs": pairs(a.set, "--set"), "seed": a.seed, "out": a.out}
+    if a.total_timesteps is not None:
+        given["total_timesteps"] = int(a.total_timesteps)
+    if getattr(a, "demos", None) is not None:
+        given["demos"] = a.demos
+    args = dataclasses.replace(args_class(), **given, **hp)
+    if a.quick:
+        if quick_args is None:
+            ap.error(f"{prog} has no --quick mode")
+        args = quick_args(args)
+    final = []
+    res = train(args, on_checkpoint=lambda steps, policy: final.append(policy), log=lambda s: print(s, flush=True))
+    res = dict(res or {})
+    if a.eval:
+        ev = evaluate(final[-1], args.env_id, args.env_kwargs)
+        res["eval"] = {"successes": ev["successes"], "episodes": ev["episodes"]}
+        print(f"[{prog}] evaluation (seeds 0..199, deterministic): {ev['successes']}/{ev['episodes']}", flush=True)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        state = next((res.pop(k) for k in ("agent", "actor", "state") if k in res), None)
+        if state is not None:
+            import torch
+            torch.save(state, out / "agent.pt")
+        path = out / "results.json"
+        before = json.loads(path.read_text()) if path.is_file() else {}
+        plain = {k: v for k, v in res.items() if k != "policy"}
+        path.write_text(json.dumps({**before, **plain, "args": dataclasses.asdict(args)}, default=str, indent=1))
+    return res

@@ -2,7 +2,8 @@
 Revenge from a Single Demonstration", 2018) on a PPO learner, over penny_env's native vector env.
 
     python -m training.start_curriculum --env-id PennyProbeSteer-Ellipse-Elastic-v0 --demos DEMOS.npz
-                                        [--total-timesteps 5e6] [--seed 0] [--set FIELD=VALUE ...] [--out DIR]
+                                        [--total-timesteps 5e6] [--seed 0] [--set FIELD=VALUE ...]
+                                        [--hp NAME=VALUE ...] [--quick] [--eval] [--out DIR]
 
 **Privileged, in training only.** Training episodes start at states of demonstrations (``Args.demos``: an .npz of
 training.protocol.save_demos, e.g. certified witness episodes of training seeds >= 100,000, made by
@@ -40,13 +41,10 @@ demonstrations: the certified witness episodes of 200 training seeds (>= 100,000
 """
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
-import json
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -398,34 +396,15 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, demos=None,
             "agent": agent.state_dict()}
 
 
+def quick_args(args: Args) -> Args:
+    """--quick: seconds on a few envs (checks the pipeline, learns nothing)."""
+    return dataclasses.replace(args, num_envs=16, num_steps=8, minibatch=64, epochs=1, total_timesteps=2048)
+
+
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m training.start_curriculum", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--env-id", default=Args.env_id)
-    ap.add_argument("--demos", required=True)
-    ap.add_argument("--total-timesteps", type=float, default=Args.total_timesteps)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="Args fields (YAML values)")
-    ap.add_argument("--env", nargs="*", default=[], metavar="FIELD=VALUE", help="env field overrides (YAML values)")
-    ap.add_argument("--out", default=None)
-    a = ap.parse_args(argv)
-    import yaml
-    args = Args(env_id=a.env_id, total_timesteps=int(a.total_timesteps), seed=a.seed, out=a.out, demos=a.demos,
-                env_kwargs={kv.split("=", 1)[0]: yaml.safe_load(kv.split("=", 1)[1]) for kv in a.env})
-    args = dataclasses.replace(args, **{kv.split("=", 1)[0]: yaml.safe_load(kv.split("=", 1)[1]) for kv in a.set})
-    res = train(args, log=lambda s: print(s, flush=True))
-    state = res.pop("agent")
-    vec = A.make_vec(args.env_id, 1, args.env_kwargs)
-    k = A.TaskConsts.of(vec)
-    agent = Agent(A.FEATURES_DIM, A.head_dim(k, args.head), args.hidden, args.log_std_init)
-    agent.load_state_dict(state)
-    res["validation_final"] = A.validate(make_policy(agent, k, args.head), args.env_id, args.env_kwargs,
-                                         args.val_episodes, args.val_seed)
-    print(json.dumps(res, default=str), flush=True)
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        torch.save(state, out / "agent.pt")
-        (out / "results.json").write_text(json.dumps({**res, "args": dataclasses.asdict(args)}, default=str, indent=1))
+    """The command line every ladder agent shares (training.protocol.cli)."""
+    from training.protocol import cli
+    return cli("training.start_curriculum", Args, train, argv, quick_args)
 
 
 if __name__ == "__main__":
