@@ -53,7 +53,7 @@ DOCS = ROOT / "docs"
 DEFAULT_CONFIG = ROOT / "configs" / "ladder" / "cpu.yaml"
 QUICK_CONFIG = ROOT / "configs" / "ladder" / "quick.yaml"
 KEYS = {"eval_seeds", "seeds", "first_checkpoint", "cells", "agents", "demos"}
-AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label", "seeds"}
+AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label", "seeds", "cells"}
 DEMO_SEED = 100_000      # demonstrations: witness episodes of seeds DEMO_SEED + j
 README_BEGIN = "<!-- ladder-answer: written by python -m studies.ladder (studies/ladder.py) -->"
 README_END = "<!-- /ladder-answer -->"
@@ -97,6 +97,13 @@ def load_config(path) -> dict:
         if "seeds" in a and not _seed_list(a["seeds"]):
             raise ValueError(f"{path}: agents.{name}.seeds must be a list of distinct non-negative integers (the "
                              f"agent's own seeds, instead of the config's), got {a['seeds']!r}")
+        if "cells" in a:  # the agent's own cells: a subset of the config's
+            own = [(c[0], c[1], "-" if c[1] == "plane" else str(c[2])) for c in a["cells"]
+                   if isinstance(c, list) and len(c) == 3]
+            if len(own) != len(a["cells"]) or not set(own) <= set(cells):
+                raise ValueError(f"{path}: agents.{name}.cells must be [probe, table, law] cells of the config's cells, "
+                                 f"got {a['cells']!r}")
+            a["cells"] = own
         if not isinstance(a["privileged"], bool):
             raise ValueError(f"{path}: agents.{name}.privileged must be true or false")
         if not set(a["probes"]) <= set(PROBE_TASKS):
@@ -154,7 +161,7 @@ def make_jobs(cfg) -> list[dict]:
     jobs = []
     for name, a in cfg["agents"].items():
         for cell in cfg["cells"]:
-            if cell[0] not in a["probes"]:
+            if cell[0] not in a["probes"] or ("cells" in a and cell not in a["cells"]):
                 continue
             budget = int(a["budget"].get("/".join(cell), a["budget"][cell[0]]))  # (a cell's own, else its probe's)
             for seed in a.get("seeds", cfg["seeds"]):

@@ -42,7 +42,12 @@ def _config(tmp_path, **changes):
     ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Drive"],
                          "budget": {"Steer": 10}}}}, "no budget for probe Drive"),
     ({"seeds": []}, "seeds"),
+    ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Steer"],
+                         "budget": {"Steer": 10}, "seeds": [0, 0]}}}, "agents.ppo.seeds"),
+    ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Steer"],
+                         "budget": {"Steer": 10}, "cells": [["Steer", "circle", "elastic"]]}}}, "agents.ppo.cells"),
 ])
+
 def test_a_bad_config_is_refused_naming_the_field(tmp_path, changes, message):
     with pytest.raises((ValueError, KeyError), match=message):
         ladder.load_config(_config(tmp_path, **changes))
@@ -100,3 +105,13 @@ def test_quick_run_writes_its_report_outside_docs(reports_untouched):
     ladder.main(["--quick", "--workers", "1", "--runs", str(reports_untouched / "runs")])
     assert result.stat().st_mtime_ns == stamp and json.loads(result.read_text())["checkpoints"]
     assert np.isfinite(float(rows[-1]["successes"]))
+
+
+def test_an_agent_may_have_its_own_seeds_and_cells(tmp_path):
+    import yaml
+    cfg = yaml.safe_load(ladder.QUICK_CONFIG.read_text())
+    cfg["agents"]["ppo"].update(seeds=[3], cells=[["Steer", "plane", "-"]])
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    jobs = ladder.make_jobs(ladder.load_config(path))
+    assert [(j["cell"], j["seed"]) for j in jobs] == [(["Steer", "plane", "-"], 3)]
