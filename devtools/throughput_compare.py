@@ -146,8 +146,9 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--vector-budget", type=int, default=None,
                     help="env-steps per vector measurement (3 to 4000 steps of the vector env)")
     args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
-    refuse_quick_into_docs(args.out, args.quick)
+    if not args.worker:  # (a worker imports only its own tree, which may have no studies/)
+        from studies.common import refuse_quick_into_docs
+        refuse_quick_into_docs(args.out, args.quick)
     if args.quick:
         args.rounds, args.ids = 1, args.ids or list(QUICK_IDS)
     args.sizes = args.sizes or ([1, 16] if args.quick else list(SIZES))
