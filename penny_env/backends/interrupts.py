@@ -1,4 +1,4 @@
-"""Ctrl-C and the compiler: numba compiles a function at its first call for a signature, and llvmlite frees
+"""Ctrl-C, concurrent processes and the compiler: numba compiles a function at its first call for a signature, and llvmlite frees
 its objects in finalizers that Python's cycle collector runs at any later moment. A KeyboardInterrupt inside
 either corrupted LLVM's state: the process aborted ("free(): double free detected in tcache 2", llvmlite's
 ``ffi.close`` in ``__del__``) when a thread sent SIGINT every 3 ms while a vector env stepped. So every place
@@ -7,6 +7,67 @@ built, and the first call of each path of a compiled loop (threads.locked)."""
 from __future__ import annotations
 
 import contextlib
+import os
+import threading
+
+_LOCK = threading.RLock()
+_HELD = {"depth": 0, "fd": None}
+
+
+def _forget_in_child() -> None:
+    # a child forked inside a held block does not hold the parent's lock (its copy of the descriptor must not release it)
+    _HELD.update(depth=0, fd=None)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_in_child)
+
+
+@contextlib.contextmanager
+def cache_lock():
+    """One process at a time compiles (or loads from numba's disk cache) penny_env's code. numba's cache index is not
+    safe for concurrent writers: two processes that save two signatures of one function (a serial and a parallel
+    loop, C- and Fortran-ordered arrays) each read the index, both take the data file ``<name>.1.nbc``, and the
+    index that survives maps one signature to the other's machine code; a later process that loads it crashes
+    (a segmentation fault at the vector env's warm-up, seen after pytest-xdist workers and parallel jobs compiled
+    side by side). An exclusive ``flock`` on ``compile.lock`` in the generated modules' folder (user-wide) is held
+    around every compile point (:func:`compiling`); reentrant within a process; without fcntl (Windows) or a
+    writable folder, no lock."""
+    with _LOCK:
+        if _HELD["depth"] == 0:
+            _HELD["fd"] = _acquire()
+        _HELD["depth"] += 1
+        try:
+            yield
+        finally:
+            _HELD["depth"] -= 1
+            if _HELD["depth"] == 0 and _HELD["fd"] is not None:
+                fd, _HELD["fd"] = _HELD["fd"], None
+                _release(fd)
+
+
+def _acquire():
+    try:
+        import fcntl
+
+        from .generated import generated_dir
+        fd = os.open(generated_dir() / "compile.lock", os.O_RDWR | os.O_CREAT, 0o666)
+    except (ImportError, OSError):
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def _release(fd) -> None:
+    import fcntl
+    try:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager
@@ -30,9 +91,10 @@ def compiling(collect=True):
     else:
         main = False
     try:
-        yield
-        if collect is True or (callable(collect) and collect()):
-            gc.collect()
+        with cache_lock():  # (numba's disk cache takes one writer at a time: cache_lock)
+            yield
+            if collect is True or (callable(collect) and collect()):
+                gc.collect()
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)

@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -247,3 +248,36 @@ def test_a_child_forked_while_another_thread_steps_uses_penny_env_at_once(layer)
     assert code == 0 and "held lock child 0" in out and "stepping children [0, 0, 0]" in out, out
     if layer:
         assert f"layer {layer}" in out, out
+
+
+def test_one_process_at_a_time_compiles_or_loads_the_cache(tmp_path):
+    """numba's cache index takes one writer at a time (two processes saving two signatures of one function both took
+    <name>.1.nbc and a later load crashed): penny_env holds an exclusive lock around every compile point. A child
+    holds it; the parent's compile point waits until the child has let go (the order of the events, not a time)."""
+    from penny_env.backends.interrupts import cache_lock
+    log = tmp_path / "events"
+    child = subprocess.Popen([sys.executable, "-c", f"""
+import time
+from penny_env.backends.interrupts import cache_lock
+with cache_lock():
+    open({str(log)!r}, "a").write("child holds\\n")
+    time.sleep(1.0)
+    open({str(log)!r}, "a").write("child lets go\\n")
+"""], env=dict(os.environ, PENNY_ENV_GENERATED_DIR=str(tmp_path)))
+    try:
+        while not log.exists():
+            time.sleep(0.01)
+        os.environ["PENNY_ENV_GENERATED_DIR"] = str(tmp_path)
+        from penny_env.backends import generated
+        saved = list(generated._DIR)
+        generated._DIR[:] = [tmp_path]
+        try:
+            with cache_lock():
+                with cache_lock():  # (reentrant in one process)
+                    log.open("a").write("parent holds\n")
+        finally:
+            generated._DIR[:] = saved
+            del os.environ["PENNY_ENV_GENERATED_DIR"]
+    finally:
+        child.wait(timeout=60)
+    assert log.read_text().splitlines() == ["child holds", "child lets go", "parent holds"]
