@@ -187,9 +187,9 @@ def check_args(args: Args) -> None:
         raise ValueError(f"env_kwargs must be a mapping of scene/task fields, got {args.env_kwargs!r}")
     if args.env_kwargs:  # the fields, checked by the env's own resolver (an unknown or bad field is named)
         from penny_env.envs.scene import env_presets, resolve
-        spec = dict(env_presets()[args.env_id])
+        fields = {**env_presets()[args.env_id], **args.env_kwargs}  # (env_kwargs may replace the scene itself)
         try:
-            resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **args.env_kwargs})
+            resolve(fields.pop("scene"), fields.pop("task"), **fields)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"env_kwargs: {exc}") from None
     if isinstance(args.curve_points, bool) or not isinstance(args.curve_points, int) or args.curve_points < 0:

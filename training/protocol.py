@@ -35,8 +35,8 @@ def fair_reward_kwargs(env_id: str, env_kwargs: dict | None = None) -> dict:
     """The fields of FAIR_REWARD (the success bonus only: studies/fair_pure_rl.py's reward) that the task of
     ``env_id`` with ``env_kwargs`` has (reach has no speed cost), so every agent trains on the same reward."""
     from penny_env.envs.scene import env_presets, resolve
-    spec = dict(env_presets()[env_id])
-    _, task = resolve(spec.pop("scene"), spec.pop("task"), **{**spec, **(env_kwargs or {})})
+    fields = {**env_presets()[env_id], **(env_kwargs or {})}  # (a cell's overrides may replace the scene itself)
+    _, task = resolve(fields.pop("scene"), fields.pop("task"), **fields)
     return {k: v for k, v in FAIR_REWARD.items() if hasattr(task, k)}
 
 

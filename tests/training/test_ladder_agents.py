@@ -143,3 +143,17 @@ def test_ppo_heading_hands_out_the_best_validated_snapshot(tmp_path, monkeypatch
     first, second, last = (p.agent.state_dict() for p in calls)
     assert same(second, first)  # (0.25 < 0.5: the first snapshot is still the best)
     assert not same(last, first) and same(last, torch.load(tmp_path / "ppo_heading" / "best_model.pt"))
+
+
+def test_the_fair_reward_and_the_args_check_take_a_cell_that_replaces_the_scene():
+    """The rounded rectangle and the circle are cells of a preset id with its scene replaced (studies/cells.py): the
+    fair reward's fields and ppo_torch's check of env_kwargs resolved the id's scene and the override's both."""
+    from studies.cells import cell_spec
+    from training.protocol import FAIR_REWARD, fair_reward_kwargs
+    for cell in [("Steer", "rounded_rectangle", "elastic"), ("Steer", "circle", "elastic")]:
+        env_id, overrides = cell_spec(*cell)
+        assert "scene" in overrides
+        assert fair_reward_kwargs(env_id, overrides) == FAIR_REWARD
+        args = ppo_torch.ladder_args(env_id=env_id, env_kwargs=overrides, total_timesteps=256, num_envs=16,
+                                     num_steps=16, minibatch_size=64)
+        ppo_torch.check_args(args)
