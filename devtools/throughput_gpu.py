@@ -425,6 +425,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ppo-sizes", nargs="+", type=int, default=[4096, 65536, 1_048_576],
                     help="the N of the env + PPO column (default 4096 65536 1048576)")
     a = ap.parse_args(argv)
+    if any(n < 1 for n in (a.sizes or ())) or (a.window is not None and a.window < 1):  # (bad input first, GPU or not)
+        ap.error("--sizes and --window must be positive")
     name = gpu_here()
     if name is None and a.quick and not simulated():
         # (numba reads NUMBA_ENABLE_CUDASIM when it is first imported: a fresh process under the simulator)

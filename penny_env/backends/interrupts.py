@@ -102,16 +102,52 @@ def compiling(collect=True):
         previous(*held[0])  # (default_int_handler raises KeyboardInterrupt)
 
 
+def guard_llvmlite_close(classes=None) -> None:
+    """llvmlite's ``close`` of an LLVM string or object frees it (a C call) and then marks it freed (Python lines); a
+    KeyboardInterrupt between the two leaves it unmarked, and its ``__del__`` frees it again: the process aborts
+    ("free(): double free detected in tcache 2", ``OutputString.close`` from ``__del__``, seen with a SIGINT every 3
+    ms around the batch API). Both ``close`` methods are wrapped once per process so that a SIGINT arriving in them
+    is held and raised again (``signal.raise_signal``) right after: the interrupt still comes, one close later.
+    Main thread only (Python delivers signals there); llvmlite's own behaviour is otherwise unchanged."""
+    import signal
+    if classes is None:
+        from llvmlite.binding import ffi
+        classes = (ffi.OutputString, ffi.ObjectRef)
+    for cls in classes:
+        close = cls.close
+        if getattr(close, "penny_env_guarded", False):
+            continue
+
+        def guarded(self, _close=close):
+            if threading.current_thread() is not threading.main_thread():
+                return _close(self)
+            previous = signal.getsignal(signal.SIGINT)
+            if not callable(previous):
+                return _close(self)
+            held = []
+            signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+            try:
+                return _close(self)
+            finally:
+                signal.signal(signal.SIGINT, previous)
+                if held:
+                    signal.raise_signal(signal.SIGINT)
+        guarded.penny_env_guarded = True
+        cls.close = guarded
+
+
 def load_numba() -> None:
     """numba imported (once per process) with Ctrl-C held: an import interrupted half way leaves numba's modules
     broken for the rest of the process ("module 'numba' has no attribute 'core'"). The envs and the batch API call
     it before they build anything compiled; ``import penny_env`` itself stays free of numba."""
     import sys
-    if "numba.core.registry" in sys.modules:
+    if "numba.core.registry" in sys.modules:  # (imported by the user first: its finalizers get the guard all the same)
+        guard_llvmlite_close()
         return
     with compiling(collect=False):
         import numba  # noqa: F401
         import numba.core.registry  # noqa: F401
+        guard_llvmlite_close()
 
 
 def overloads(*functions) -> int:

@@ -234,11 +234,13 @@ def test_gpu_outputs_are_device_tensors_and_match_the_cpu():
 
 
 def test_throughput_gpu_measures_nothing_and_writes_no_report_without_a_gpu(tmp_path, capsys):
+    """A full run needs a GPU: without one it says so and writes nothing (--quick runs the table under the CUDA
+    simulator instead: tests/devtools/test_gpu_tools.py)."""
     if _gpu_present():
         pytest.skip("a GPU is here: the command would measure it")
     from devtools import throughput_gpu
     out = tmp_path / "throughput_gpu.md"
-    assert throughput_gpu.main(["--quick", "--out", str(out)]) == 0
+    assert throughput_gpu.main(["--ids", "PennyReach-Ellipse-v0", "--sizes", "8", "--out", str(out)]) == 0
     assert not out.exists() and "no CUDA GPU here" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         throughput_gpu.main(["--sizes", "0"])

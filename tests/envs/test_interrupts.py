@@ -49,3 +49,35 @@ def test_a_handler_of_the_users_own_is_held_through_a_compile_and_called_once_af
         assert calls == [signal.SIGINT] * 2  # (restored after the block)
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+
+def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after():
+    """llvmlite's close frees, then marks freed: a KeyboardInterrupt between the two made __del__ free again (the
+    process aborted: double free). penny_env wraps both close methods when it loads numba; a SIGINT that arrives
+    inside close is raised again once close is done."""
+    import signal
+
+    pytest.importorskip("numba")
+    from llvmlite.binding import ffi
+
+    from penny_env.backends.interrupts import guard_llvmlite_close, load_numba
+    load_numba()
+    assert ffi.OutputString.close.penny_env_guarded and ffi.ObjectRef.close.penny_env_guarded
+
+    class Resource:  # llvmlite's shape: free, then mark; the SIGINT comes in between
+        def __init__(self):
+            self.freed = self.marked = False
+
+        def close(self):
+            self.freed = True
+            os.kill(os.getpid(), signal.SIGINT)
+            sum(range(10000))  # (Python would run the handler here, between the two steps)
+            self.marked = True
+
+    guard_llvmlite_close((Resource,))
+    guard_llvmlite_close((Resource,))  # (wrapped once)
+    r = Resource()
+    with pytest.raises(KeyboardInterrupt):
+        r.close()
+    assert r.freed and r.marked
