@@ -388,7 +388,9 @@ def goals(cfg, summary) -> list[str]:
              f"({', '.join(f'{t}: {sorted(set(a))}' for t, a in sorted(fair_steer.items())) or 'on no table'})",
              f"- the privileged agents reach at least 0.8 of the witnessed rate on every witnessed single-input cell: "
              f"**{'met' if priv and all(v >= 0.8 for v in priv.values()) else 'not met'}** (best privileged share per "
-             f"cell: {', '.join(f'{cell_name(c)} {v:.2f}' for c, v in priv.items())})",
+             f"cell: {', '.join(f'{cell_name(c)} {v:.2f}' for c, v in priv.items() if not math.isnan(v)) or 'none'}"
+             + (f"; no privileged agent ran on {', '.join(cell_name(c) for c, v in priv.items() if math.isnan(v))}"
+                if any(math.isnan(v) for v in priv.values()) else "") + ")",
              f"- every agent stays at 0 on the plane: **{'met' if all(s['success'] == 0 for s in plane) else 'NOT met'}** "
              f"({len(plane)} (agent, cell) rows)"]
     return lines
