@@ -413,7 +413,9 @@ def answer_sentences(cfg, summary) -> list[str]:
 
         def span(bs):
             v = [b["share"] for b in bs if not math.isnan(b["share"])]
-            return f"{min(v):.2f} to {max(v):.2f}" if v else "-"
+            if not v:
+                return "-"
+            return f"{v[0]:.2f}" if len(v) == 1 else f"{min(v):.2f} to {max(v):.2f}"
         out.append(f"**{words}**: the best agent without privileged resets reaches {span(fair)} of the witnessed rate "
                    f"on the {len(fair)} cell(s) the ladder ran" + (f"; with privileged resets {span(priv)}" if priv else "")
                    + " (pair seeds of the witness study; [docs/ladder.md](docs/ladder.md)).")
