@@ -10,66 +10,6 @@ import contextlib
 import os
 import threading
 
-_LOCK = threading.RLock()
-_HELD = {"depth": 0, "fd": None}
-
-
-def _forget_in_child() -> None:
-    # a child forked inside a held block does not hold the parent's lock (its copy of the descriptor must not release it)
-    _HELD.update(depth=0, fd=None)
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_in_child)
-
-
-@contextlib.contextmanager
-def cache_lock():
-    """One process at a time compiles (or loads from numba's disk cache) penny_env's code. numba's cache index is not
-    safe for concurrent writers: two processes that save two signatures of one function (a serial and a parallel
-    loop, C- and Fortran-ordered arrays) each read the index, both take the data file ``<name>.1.nbc``, and the
-    index that survives maps one signature to the other's machine code; a later process that loads it crashes
-    (a segmentation fault at the vector env's warm-up, seen after pytest-xdist workers and parallel jobs compiled
-    side by side). An exclusive ``flock`` on ``compile.lock`` in the generated modules' folder (user-wide) is held
-    around every compile point (:func:`compiling`); reentrant within a process; without fcntl (Windows) or a
-    writable folder, no lock."""
-    with _LOCK:
-        if _HELD["depth"] == 0:
-            _HELD["fd"] = _acquire()
-        _HELD["depth"] += 1
-        try:
-            yield
-        finally:
-            _HELD["depth"] -= 1
-            if _HELD["depth"] == 0 and _HELD["fd"] is not None:
-                fd, _HELD["fd"] = _HELD["fd"], None
-                _release(fd)
-
-
-def _acquire():
-    try:
-        import fcntl
-
-        from .generated import generated_dir
-        fd = os.open(generated_dir() / "compile.lock", os.O_RDWR | os.O_CREAT, 0o666)
-    except (ImportError, OSError):
-        return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-    except OSError:
-        os.close(fd)
-        return None
-    return fd
-
-
-def _release(fd) -> None:
-    import fcntl
-    try:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-    finally:
-        os.close(fd)
-
-
 @contextlib.contextmanager
 def compiling(collect=True):
     """Around a compile (or a load from numba's cache) that a user's Ctrl-C could interrupt: SIGINT is held until the
@@ -91,10 +31,9 @@ def compiling(collect=True):
     else:
         main = False
     try:
-        with cache_lock():  # (numba's disk cache takes one writer at a time: cache_lock)
-            yield
-            if collect is True or (callable(collect) and collect()):
-                gc.collect()
+        yield
+        if collect is True or (callable(collect) and collect()):
+            gc.collect()
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)
@@ -136,6 +75,37 @@ def guard_llvmlite_close(classes=None) -> None:
         cls.close = guarded
 
 
+def lock_numba_cache_saves() -> None:
+    """numba's cache index is not safe for concurrent writers: two processes that save two signatures of one function
+    (a serial and a parallel loop, C- and Fortran-ordered arrays) each read the index, both take the data file
+    ``<name>.1.nbc``, and the index that survives maps one signature to the other's machine code; a later process
+    that loads it crashes (segmentation faults at the vector env's warm-up, seen after parallel jobs and test
+    workers compiled side by side). numba's ``IndexDataCacheFile.save`` is wrapped once per process so that it holds
+    an exclusive ``flock`` on ``<index>.lock`` while it reads the index, picks the data file's name and writes both
+    (milliseconds; a compile itself is not held). Without fcntl (Windows) or a writable lock file, numba's own save."""
+    from numba.core import caching
+    save = caching.IndexDataCacheFile.save
+    if getattr(save, "penny_env_locked", False):
+        return
+
+    def locked_save(self, key, data, _save=save):
+        index = getattr(self, "_index_path", None)  # (numba's private layout, 0.61-0.68; else its own save)
+        try:
+            import fcntl
+            fd = os.open(str(index) + ".lock", os.O_RDWR | os.O_CREAT, 0o666) if index else None
+        except (ImportError, OSError):
+            fd = None
+        if fd is None:
+            return _save(self, key, data)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            return _save(self, key, data)
+        finally:
+            os.close(fd)  # (closing the descriptor releases the lock)
+    locked_save.penny_env_locked = True
+    caching.IndexDataCacheFile.save = locked_save
+
+
 def load_numba() -> None:
     """numba imported (once per process) with Ctrl-C held: an import interrupted half way leaves numba's modules
     broken for the rest of the process ("module 'numba' has no attribute 'core'"). The envs and the batch API call
@@ -143,11 +113,13 @@ def load_numba() -> None:
     import sys
     if "numba.core.registry" in sys.modules:  # (imported by the user first: its finalizers get the guard all the same)
         guard_llvmlite_close()
+        lock_numba_cache_saves()
         return
     with compiling(collect=False):
         import numba  # noqa: F401
         import numba.core.registry  # noqa: F401
         guard_llvmlite_close()
+        lock_numba_cache_saves()
 
 
 def overloads(*functions) -> int:

@@ -250,34 +250,35 @@ def test_a_child_forked_while_another_thread_steps_uses_penny_env_at_once(layer)
         assert f"layer {layer}" in out, out
 
 
-def test_one_process_at_a_time_compiles_or_loads_the_cache(tmp_path):
+
+def test_numba_cache_saves_take_turns_across_processes(tmp_path):
     """numba's cache index takes one writer at a time (two processes saving two signatures of one function both took
-    <name>.1.nbc and a later load crashed): penny_env holds an exclusive lock around every compile point. A child
-    holds it; the parent's compile point waits until the child has let go (the order of the events, not a time)."""
-    from penny_env.backends.interrupts import cache_lock
+    <name>.1.nbc, and a later load crashed): penny_env wraps numba's save in an exclusive lock on <index>.lock. A
+    child holds that lock; the parent's save waits until the child has let go (the order of the events, not a
+    time), and then the index holds the parent's entry."""
+    pytest.importorskip("numba")
+    from numba.core import caching
+
+    from penny_env.backends.interrupts import load_numba
+    load_numba()
+    assert caching.IndexDataCacheFile.save.penny_env_locked
+    index = tmp_path / "f.nbi"
     log = tmp_path / "events"
     child = subprocess.Popen([sys.executable, "-c", f"""
-import time
-from penny_env.backends.interrupts import cache_lock
-with cache_lock():
-    open({str(log)!r}, "a").write("child holds\\n")
-    time.sleep(1.0)
-    open({str(log)!r}, "a").write("child lets go\\n")
-"""], env=dict(os.environ, PENNY_ENV_GENERATED_DIR=str(tmp_path)))
+import fcntl, os, time
+fd = os.open({str(index) + ".lock"!r}, os.O_RDWR | os.O_CREAT)
+fcntl.flock(fd, fcntl.LOCK_EX)
+open({str(log)!r}, "a").write("child holds\\n")
+time.sleep(1.0)
+open({str(log)!r}, "a").write("child lets go\\n")
+"""])
     try:
         while not log.exists():
             time.sleep(0.01)
-        os.environ["PENNY_ENV_GENERATED_DIR"] = str(tmp_path)
-        from penny_env.backends import generated
-        saved = list(generated._DIR)
-        generated._DIR[:] = [tmp_path]
-        try:
-            with cache_lock():
-                with cache_lock():  # (reentrant in one process)
-                    log.open("a").write("parent holds\n")
-        finally:
-            generated._DIR[:] = saved
-            del os.environ["PENNY_ENV_GENERATED_DIR"]
+        cache_file = caching.IndexDataCacheFile(cache_path=str(tmp_path), filename_base="f", source_stamp="stamp")
+        cache_file.save(("sig", "target"), b"machine code")
+        log.open("a").write("parent saved\n")
     finally:
         child.wait(timeout=60)
-    assert log.read_text().splitlines() == ["child holds", "child lets go", "parent holds"]
+    assert log.read_text().splitlines() == ["child holds", "child lets go", "parent saved"]
+    assert cache_file.load(("sig", "target")) == b"machine code"
