@@ -42,6 +42,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 from torch.distributions.normal import Normal
+from training.ppo_torch import compute_gae  # (the one GAE over a NEXT_STEP rollout)
 from training.protocol import fair_reward_kwargs
 
 # -- hyperparameters ------------------------------------------------------------------------------------
@@ -165,20 +166,6 @@ def training_kwargs(args: Args) -> dict:
     return {**args.env_kwargs, **fair_reward_kwargs(args.env_id, args.env_kwargs)}
 
 
-def gae(rewards, values, next_value, terminations, dones, valid, gamma, lam):
-    """GAE over a NEXT_STEP rollout (training/ppo_torch.py's compute_gae): the reset steps (valid 0) have advantage
-    0 and cut the trace; a truncated episode bootstraps on its last observation's value."""
-    T = rewards.shape[0]
-    adv = torch.zeros_like(rewards)
-    last = torch.zeros_like(next_value)
-    for t in reversed(range(T)):
-        nv = next_value if t == T - 1 else values[t + 1]
-        delta = rewards[t] + gamma * nv * (1.0 - terminations[t]) - values[t]
-        last = (delta + gamma * lam * (1.0 - dones[t]) * last) * valid[t]
-        adv[t] = last
-    return adv, adv + values
-
-
 def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     """Train for args.total_timesteps env steps (training/protocol.py); returns the results dict."""
     import gymnasium as gym
@@ -276,9 +263,9 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
             RI.copy_(r_int / ret_rms.var.sqrt().clamp(min=1e-8))
             obs_rms.update(NO.reshape(-1, obs_dim)[VALID.reshape(-1).bool()])
             nv = agent.critic(obs)
-            adv_e, ret_e = gae(RE, VE, nv[:, 0], TERM, DONE, VALID, args.gamma, args.gae_lambda)
+            adv_e, ret_e = compute_gae(RE, VE, TERM, DONE, VALID, nv[:, 0], args.gamma, args.gae_lambda)
             zeros = torch.zeros_like(TERM)  # intrinsic: non-episodic (bootstraps through the ends)
-            adv_i, ret_i = gae(RI, VI, nv[:, 1], zeros, DONE, VALID, args.gamma_int, args.gae_lambda)
+            adv_i, ret_i = compute_gae(RI, VI, zeros, DONE, VALID, nv[:, 1], args.gamma_int, args.gae_lambda)
         keep = VALID.reshape(-1).bool()
         bo, ba, blp = O.reshape(-1, obs_dim)[keep], A.reshape(-1, act_dim)[keep], LP.reshape(-1)[keep]
         bno = whiten(NO.reshape(-1, obs_dim)[keep])
