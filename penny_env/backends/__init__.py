@@ -8,6 +8,8 @@ builder.py          copies of plain functions for a target ("python", "cpu": num
                     over pennies (parallel on the CPU, kernels on CUDA); loud failures (BuildError)
 generated.py        generated source (loops, kernels, unpackers, the law dispatch) written to real files
 cache.py            numba's disk cache: which builds may be cached, under which names; the first-use line
+numba_repairs.py    two defects of numba's disk cache, repaired (concurrent saves; parallel loops' callers)
+interrupts.py       Ctrl-C around compiles and llvmlite's finalizers; numba imported once, repaired
 threads.py          the CPU's threading: layer, idle policy, the lock around parallel calls, serial paths
 choice.py           which backend a table runs on
 numba_math.py,      the math namespaces (``xp``) of the CPU and CUDA copies

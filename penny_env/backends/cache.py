@@ -31,8 +31,7 @@ def drop_stale_cache(folder, modules) -> None:
     machine code cached in ``folder`` (a package __pycache__) by earlier versions of ``modules``, so that
     edits do not pile up old files there. Only files whose names lack the current digest go: processes
     that start together after an edit (pytest-xdist workers, a pool of env workers) compile and load the
-    current files side by side, and none deletes what another has just written (a segmentation fault
-    was seen once while loading after such concurrent deletions; its cause is not pinned down). Other
+    current files side by side, and none deletes what another has just written. Other
     cache locations keep old files, which are never loaded (their names carry the old digest)."""
     folder = Path(folder)
     current = source_digest(modules)

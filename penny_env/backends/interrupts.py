@@ -1,4 +1,4 @@
-"""Ctrl-C, concurrent processes and the compiler: numba compiles a function at its first call for a signature, and llvmlite frees
+"""Ctrl-C and the compiler: numba compiles a function at its first call for a signature, and llvmlite frees
 its objects in finalizers that Python's cycle collector runs at any later moment. A KeyboardInterrupt inside
 either corrupted LLVM's state: the process aborted ("free(): double free detected in tcache 2", llvmlite's
 ``ffi.close`` in ``__del__``) when a thread sent SIGINT every 3 ms while a vector env stepped. So every place
@@ -7,8 +7,10 @@ built, and the first call of each path of a compiled loop (threads.locked)."""
 from __future__ import annotations
 
 import contextlib
-import os
 import threading
+
+from .numba_repairs import repair_numba_cache
+
 
 @contextlib.contextmanager
 def compiling(collect=True):
@@ -75,37 +77,6 @@ def guard_llvmlite_close(classes=None) -> None:
         cls.close = guarded
 
 
-def lock_numba_cache_saves() -> None:
-    """numba's cache index is not safe for concurrent writers: two processes that save two signatures of one function
-    (a serial and a parallel loop, C- and Fortran-ordered arrays) each read the index, both take the data file
-    ``<name>.1.nbc``, and the index that survives maps one signature to the other's machine code; a later process
-    that loads it crashes (segmentation faults at the vector env's warm-up, seen after parallel jobs and test
-    workers compiled side by side). numba's ``IndexDataCacheFile.save`` is wrapped once per process so that it holds
-    an exclusive ``flock`` on ``<index>.lock`` while it reads the index, picks the data file's name and writes both
-    (milliseconds; a compile itself is not held). Without fcntl (Windows) or a writable lock file, numba's own save."""
-    from numba.core import caching
-    save = caching.IndexDataCacheFile.save
-    if getattr(save, "penny_env_locked", False):
-        return
-
-    def locked_save(self, key, data, _save=save):
-        index = getattr(self, "_index_path", None)  # (numba's private layout, 0.61-0.68; else its own save)
-        try:
-            import fcntl
-            fd = os.open(str(index) + ".lock", os.O_RDWR | os.O_CREAT, 0o666) if index else None
-        except (ImportError, OSError):
-            fd = None
-        if fd is None:
-            return _save(self, key, data)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)
-            return _save(self, key, data)
-        finally:
-            os.close(fd)  # (closing the descriptor releases the lock)
-    locked_save.penny_env_locked = True
-    caching.IndexDataCacheFile.save = locked_save
-
-
 def load_numba() -> None:
     """numba imported (once per process) with Ctrl-C held: an import interrupted half way leaves numba's modules
     broken for the rest of the process ("module 'numba' has no attribute 'core'"). The envs and the batch API call
@@ -113,13 +84,13 @@ def load_numba() -> None:
     import sys
     if "numba.core.registry" in sys.modules:  # (imported by the user first: its finalizers get the guard all the same)
         guard_llvmlite_close()
-        lock_numba_cache_saves()
+        repair_numba_cache()
         return
     with compiling(collect=False):
         import numba  # noqa: F401
         import numba.core.registry  # noqa: F401
         guard_llvmlite_close()
-        lock_numba_cache_saves()
+        repair_numba_cache()
 
 
 def overloads(*functions) -> int:

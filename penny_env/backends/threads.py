@@ -97,6 +97,15 @@ def serial_now() -> bool:
     return _FORKED_AFTER_OPENMP
 
 
+def launch_threads() -> None:
+    """numba's threads launched now (a no-op once they are). A parallel loop's first call needs it: numba launches
+    them when it compiles a parallel loop or loads one from its disk cache, but not when it loads a function that
+    calls one and was compiled against a cached copy of that loop (numba issues #8578, #9938): the call went through
+    a null pointer (numba_repairs.py, which keeps new cache entries right; this covers those written before)."""
+    import numba
+    numba.get_num_threads()  # (public API; it launches the threads first)
+
+
 def locked(f, serial=None, count=None):
     """f called under :data:`PARALLEL_LOCK` (a compiled parallel function, for several Python threads);
     count(args) gives the pennies of a call (default: the first argument's last axis). ``serial()`` (the same function
@@ -116,6 +125,8 @@ def locked(f, serial=None, count=None):
         path = "serial" if serial is not None and (_FORKED_AFTER_OPENMP or count(args) < SERIAL_BELOW) else "parallel"
         if path not in warm:
             with compiling():  # (a Ctrl-C is held until the compile is done, and raised once it is kept: interrupts.py)
+                if path == "parallel":
+                    launch_threads()
                 out = run(path, args)
                 warm.add(path)
             return out

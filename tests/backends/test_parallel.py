@@ -282,3 +282,63 @@ open({str(log)!r}, "a").write("child lets go\\n")
         child.wait(timeout=60)
     assert log.read_text().splitlines() == ["child holds", "child lets go", "parent saved"]
     assert cache_file.load(("sig", "target")) == b"machine code"
+
+
+CALLER_OF_A_PARALLEL_LOOP = '''
+import numba
+import numpy as np
+
+
+@numba.njit(parallel=True, cache=True)
+def doubled(a):
+    out = np.zeros(a.shape[0])
+    for i in numba.prange(a.shape[0]):
+        out[i] = 2.0 * a[i]
+    return out
+
+
+@numba.njit(cache=True)
+def total(a):
+    return doubled(a).sum()
+'''
+
+
+def run_in(folder, code, **env):
+    """(returncode, output) of ``code`` in a new interpreter that imports the module ``loops`` from ``folder``."""
+    full = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_THREADING_LAYER")}
+    full.update(env, PYTHONPATH=os.pathsep.join([str(folder), str(ROOT)]))
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=folder, env=full, capture_output=True,
+                         text=True, timeout=300)
+    return out.returncode, out.stdout + out.stderr
+
+
+def cache_a_caller_compiled_against_a_cached_loop(folder, repaired):
+    """The order that crashed (numba issues #8578, #9938): one process compiles and caches the parallel loop, a second
+    loads it from the cache and compiles (and caches) a function that calls it, with or without penny_env's repair."""
+    (folder / "loops.py").write_text(CALLER_OF_A_PARALLEL_LOOP)
+    code, out = run_in(folder, "import numpy as np, loops; print(loops.doubled(np.ones(1000)).sum())")
+    assert code == 0 and "2000.0" in out, out
+    repair = ("from penny_env.backends.numba_repairs import repair_numba_cache; repair_numba_cache()\n"
+              if repaired else "")
+    code, out = run_in(folder, repair + "import numpy as np, loops; print(loops.total(np.ones(1000)))")
+    assert code == 0 and "2000.0" in out, out
+
+
+def test_a_caller_cached_against_a_cached_parallel_loop_launches_the_threads_when_loaded(tmp_path):
+    # numba_repairs.keep_parallel_init_on_cached_loads: the caller's cache entry keeps the launch of numba's threads,
+    # so a third process that loads it (numba alone, no penny_env) runs it
+    cache_a_caller_compiled_against_a_cached_loop(tmp_path, repaired=True)
+    code, out = run_in(tmp_path, "import numpy as np, loops; print(loops.total(np.ones(1000)))")
+    assert code == 0 and "2000.0" in out, out
+
+
+def test_a_locked_loop_launches_the_threads_before_its_first_parallel_call(tmp_path):
+    # threads.locked covers cache entries written without the repair (by an older penny_env, or numba alone)
+    cache_a_caller_compiled_against_a_cached_loop(tmp_path, repaired=False)
+    code, out = run_in(tmp_path, """
+        import numpy as np, loops
+        from penny_env.backends import threads
+        total = threads.locked(loops.total, count=lambda args: threads.SERIAL_BELOW)  # (the parallel path)
+        print(total(np.ones(1000)))
+    """)
+    assert code == 0 and "2000.0" in out, out
