@@ -197,6 +197,47 @@ def progress_lines_callback(total: int, every_seconds: float, curve=None, print_
     return ProgressLines()
 
 
+def stop_on_ctrl_c_callback():
+    """An SB3 callback that turns Ctrl-C into a stop at the next env step. While learn runs (main thread, Python's own
+    SIGINT handler in place), a SIGINT sets a flag instead of raising KeyboardInterrupt wherever Python happens to be:
+    raised inside a finalizer (llvmlite's, numba's) Python ignores it ("Exception ignored in ...") and training went
+    on; raised inside an update it could leave the model half written. ``_on_step`` then returns False and SB3's learn
+    returns; the runner saves the checkpoint. A second Ctrl-C raises KeyboardInterrupt at once. penny_env's compiles
+    hold a SIGINT and hand it to this handler when they are done (backends/interrupts.compiling). A handler of the
+    user's own is left in place. ``restore()`` puts the previous handler back (also called at the training's end)."""
+    import signal
+    import threading
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class StopOnCtrlC(BaseCallback):
+        requested = False
+        _previous = None
+
+        def _on_training_start(self):
+            if threading.current_thread() is threading.main_thread() and \
+                    signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+                self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+
+        def _on_sigint(self, signum, frame):
+            if self.requested:
+                raise KeyboardInterrupt
+            self.requested = True
+
+        def _on_step(self):
+            return not self.requested
+
+        def _on_training_end(self):
+            self.restore()
+
+        def restore(self):
+            if self._previous is not None:
+                signal.signal(signal.SIGINT, self._previous)
+                self._previous = None
+
+    return StopOnCtrlC()
+
+
 def _checkpoint_steps(path: Path) -> int:
     from training.run_folder import checkpoint_steps
     return checkpoint_steps(path)
@@ -360,11 +401,18 @@ def train_one(run_dir, env_id: str, algo: str, seed: int, timesteps: int, num_en
     if progress == "lines":
         callbacks.append(progress_lines_callback(timesteps, progress_seconds, curve))
     callbacks.extend(extra_callbacks)
+    ctrl_c = stop_on_ctrl_c_callback()
+    callbacks.append(ctrl_c)
     remaining = timesteps - model.num_timesteps
     if remaining > 0:
         try:
-            model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
-                        reset_num_timesteps=resume is None, progress_bar=progress == "bar")
+            try:
+                model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
+                            reset_num_timesteps=resume is None, progress_bar=progress == "bar")
+            finally:
+                ctrl_c.restore()
+            if ctrl_c.requested:
+                raise KeyboardInterrupt
         except KeyboardInterrupt:
             saver.init_callback(model)  # (set when learn started; again in case Ctrl-C came before)
             checkpoint = saver.save_now()

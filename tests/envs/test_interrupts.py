@@ -52,18 +52,12 @@ def test_a_handler_of_the_users_own_is_held_through_a_compile_and_called_once_af
 
 
 
-def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after():
-    """llvmlite's close frees, then marks freed: a KeyboardInterrupt between the two made __del__ free again (the
-    process aborted: double free). penny_env wraps both close methods when it loads numba; a SIGINT that arrives
-    inside close is raised again once close is done."""
-    import signal
-
-    pytest.importorskip("numba")
+LLVMLITE_CLOSE_GUARDED = """
+    import os, signal
     from llvmlite.binding import ffi
-
     from penny_env.backends.interrupts import guard_llvmlite_close, load_numba
     load_numba()
-    assert ffi.OutputString.close.penny_env_guarded and ffi.ObjectRef.close.penny_env_guarded
+    print("guarded", ffi.OutputString.close.penny_env_guarded and ffi.ObjectRef.close.penny_env_guarded)
 
     class Resource:  # llvmlite's shape: free, then mark; the SIGINT comes in between
         def __init__(self):
@@ -78,6 +72,23 @@ def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after():
     guard_llvmlite_close((Resource,))
     guard_llvmlite_close((Resource,))  # (wrapped once)
     r = Resource()
-    with pytest.raises(KeyboardInterrupt):
+    try:
         r.close()
-    assert r.freed and r.marked
+        print("no KeyboardInterrupt")
+    except KeyboardInterrupt:
+        print("KeyboardInterrupt after close", r.freed and r.marked)
+"""
+
+
+def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after():
+    """llvmlite's close frees, then marks freed: a KeyboardInterrupt between the two made __del__ free again (the
+    process aborted: double free). penny_env wraps both close methods when it loads numba; a SIGINT that arrives
+    inside close is raised again once close is done. In a fresh interpreter (its main thread, Python's own SIGINT
+    handler): in a test worker, what earlier tests left (threads, handlers) is not the case under test."""
+    pytest.importorskip("numba")
+    import textwrap
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", textwrap.dedent(LLVMLITE_CLOSE_GUARDED)], capture_output=True,
+                       text=True, timeout=600, env=env, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "guarded True" in r.stdout and "KeyboardInterrupt after close True" in r.stdout, r.stdout + r.stderr[-3000:]
