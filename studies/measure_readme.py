@@ -53,13 +53,18 @@ def steps_of(block: str) -> list[str]:
 
 
 def copy_checkout(dest: Path) -> Path:
-    """The checkout's files (tracked and untracked, not ignored) copied to dest: a fresh clone's view."""
+    """The checkout's files (tracked and untracked, not ignored) copied to dest, and committed there into a git
+    repository of their own: a fresh clone's view (the suite's tests that need a git checkout, as CI's clean
+    checkout has, run instead of skipping)."""
     files = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
                            capture_output=True, text=True, check=True).stdout.split("\0")
     for f in filter(None, files):
         if (ROOT / f).is_file():
             (dest / f).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / f, dest / f)
+    who = ["-c", "user.name=measure_readme", "-c", "user.email=measure_readme@localhost", "-c", "commit.gpgsign=false"]
+    for cmd in (["init", "-q"], ["add", "-A"], [*who, "commit", "-q", "-m", "the checkout, copied"]):
+        subprocess.run(["git", *cmd], cwd=dest, capture_output=True, check=True)
     return dest
 
 

@@ -144,3 +144,15 @@ def test_the_readme_quotes_the_committed_measurement():
     for part in measure_readme.PARTS:
         expected = " ".join(measure_readme.readme_sentence(part, results.get(part), readme).split())
         assert measure_readme.readme_marked(readme, part) == expected, part
+
+
+def test_the_copy_is_a_clean_git_checkout_of_the_files(tmp_path):
+    # the README's test command in the copy runs the tests that need a git checkout (as CI's clean checkout does)
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs git and a git checkout")
+    import subprocess
+    dest = measure_readme.copy_checkout(tmp_path)
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=dest, capture_output=True, text=True, check=True)
+    assert status.stdout == ""
+    tracked = subprocess.run(["git", "ls-files"], cwd=dest, capture_output=True, text=True, check=True).stdout.split()
+    assert "README.md" in tracked and "penny_env/__init__.py" in tracked and "pyproject.toml" in tracked
