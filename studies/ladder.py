@@ -375,7 +375,9 @@ def goals(cfg, summary) -> list[str]:
     fair_steer = {}
     for s in summary:
         if not s["privileged"] and s["cell"][0] == "Steer" and s["cell"][1] != "plane" and s["share"] >= 0.5:
-            fair_steer.setdefault(s["cell"][1], []).append(s["agent"])
+            fair_steer.setdefault(s["cell"][1], []).append(
+                f"{s['agent']} {s['share']:.2f} of it, {s['seeds']} seeds, interval {s['share_ci'][0]:.2f} to "
+                f"{min(s['share_ci'][1], 1.0):.2f}")
     single = [c for c in cfg["cells"] if c[0] in ("Steer", "Drive") and c[1] != "plane"]
     priv = {}
     for c in single:
@@ -384,8 +386,9 @@ def goals(cfg, summary) -> list[str]:
         priv[c] = best
     plane = [s for s in summary if s["cell"][1] == "plane"]
     lines = [f"- an agent without privileged resets reaches at least half the witnessed rate on steer-only park on at "
-             f"least two tables: **{'met' if len(fair_steer) >= 2 else 'not met'}** "
-             f"({', '.join(f'{t}: {sorted(set(a))}' for t, a in sorted(fair_steer.items())) or 'on no table'})",
+             f"least two tables: **{'met' if len(fair_steer) >= 2 else 'not met'}** by the pooled rate "
+             f"({'; '.join(f'{t}: ' + ', '.join(sorted(set(a))) for t, a in sorted(fair_steer.items())) or 'on no table'}"
+             f"; where an interval's lower end is below 0.5, the seeds do not establish it)",
              f"- the privileged agents reach at least 0.8 of the witnessed rate on every witnessed single-input cell: "
              f"**{'met' if priv and all(v >= 0.8 for v in priv.values()) else 'not met'}** (best privileged share per "
              f"cell: {', '.join(f'{cell_name(c)} {v:.2f}' for c, v in priv.items() if not math.isnan(v)) or 'none'}"
