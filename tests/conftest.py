@@ -121,3 +121,14 @@ def reports_untouched(tmp_path, monkeypatch):
     yield tmp_path
     assert _reports_snapshot() == before
     assert not os.path.exists(os.path.join(tmp_path, "docs")), "a report without --out landed in ./docs"
+
+
+@pytest.fixture
+def python_sigint_handler():
+    """Python's own SIGINT handler (KeyboardInterrupt) in this process for the test, and so SIG_DFL in the processes
+    it starts (a handler is reset at exec; Python then installs its own): a shell starts a background job (``cmd &``,
+    nohup) with SIGINT ignored, its processes inherit that, and a test of what Ctrl-C does would test nothing."""
+    import signal
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

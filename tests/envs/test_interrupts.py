@@ -80,7 +80,7 @@ LLVMLITE_CLOSE_GUARDED = """
 """
 
 
-def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after():
+def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after(python_sigint_handler):
     """llvmlite's close frees, then marks freed: a KeyboardInterrupt between the two made __del__ free again (the
     process aborted: double free). penny_env wraps both close methods when it loads numba; a SIGINT that arrives
     inside close is raised again once close is done. In a fresh interpreter (its main thread, Python's own SIGINT

@@ -30,7 +30,7 @@ def _learn_with_a_sigint_inside_a_finalizer(callbacks, at_step=20, total=4096):
     return model
 
 
-def test_a_ctrl_c_inside_a_finalizer_stops_training_at_the_next_step_and_the_handler_is_restored():
+def test_a_ctrl_c_inside_a_finalizer_stops_training_at_the_next_step_and_the_handler_is_restored(python_sigint_handler):
     from training.runner import stop_on_ctrl_c_callback
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     ctrl_c = stop_on_ctrl_c_callback()
@@ -40,7 +40,7 @@ def test_a_ctrl_c_inside_a_finalizer_stops_training_at_the_next_step_and_the_han
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
-def test_without_it_the_same_ctrl_c_is_lost():
+def test_without_it_the_same_ctrl_c_is_lost(python_sigint_handler):
     # the case the callback exists for: Python ignores ("Exception ignored in ...") the KeyboardInterrupt raised in
     # the finalizer, and learn runs to its end
     model = _learn_with_a_sigint_inside_a_finalizer([])

@@ -172,7 +172,7 @@ def test_an_interrupted_sac_run_saves_model_and_buffer_and_resumes_with_its_time
 
 
 @pytest.mark.slow
-def test_ctrl_c_prints_the_resume_command_which_appends_and_reports_the_whole_time(tmp_path):
+def test_ctrl_c_prints_the_resume_command_which_appends_and_reports_the_whole_time(tmp_path, python_sigint_handler):
     """SIGINT to `python -m training.train`: no traceback, one line with the exact resume command, exit 130;
     that command goes on from the checkpoint, appends to progress.csv and reports the whole run's time."""
     from training.runner import latest_checkpoint
