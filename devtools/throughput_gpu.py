@@ -112,6 +112,8 @@ class Device:
         """A step's output as a torch tensor (on the GPU; the host's torch in simulation)."""
         if self.sim:
             return self.torch.as_tensor(np.asarray(x.copy_to_host(), dtype=np.float32))
+        if not isinstance(x, self.torch.Tensor):  # a numba device array (the reset's buffer): zero-copy view
+            x = self.torch.as_tensor(x, device="cuda")
         return x.float() if x.dtype != self.torch.float32 else x
 
     def copy_actions(self, dev, a):
@@ -263,8 +265,12 @@ def columns(env_id, n, window, steady_after, device: Device, cpu: bool, ppo: boo
         ends = {}
 
         def go(name, fn, on=env, start=None):
-            r[name] = n * window / timed(device, start or (lambda: restore(on, state)), fn, window)
-            ends[name] = end_state(on)
+            try:
+                r[name] = n * window / timed(device, start or (lambda: restore(on, state)), fn, window)
+                ends[name] = end_state(on)
+            except Exception as exc:  # noqa: BLE001 (one failing column must not cost the rows of a lent GPU)
+                r.setdefault("errors", {})[name] = f"{type(exc).__name__}: {exc}"
+                print(f"{env_id} N={n:,} {window_name} {name}: failed: {type(exc).__name__}: {exc}", flush=True)
         go("env.step", lambda t: env.step(acts[t]))
         parity = [0]
 
@@ -306,8 +312,9 @@ def columns(env_id, n, window, steady_after, device: Device, cpu: bool, ppo: boo
             def cpu_start():
                 restore(cpu_env, t0_state)
             r["CPU"] = n * window / timed_cpu(cpu_start, lambda t: cpu_env.step(host[t]), window)
-        ref = ends["env.step"]
-        r["same end state"] = {name: bool(np.array_equal(ref.view(np.int64), s.view(np.int64))) for name, s in ends.items()}
+        ref = ends.get("env.step")
+        r["same end state"] = ({name: bool(np.array_equal(ref.view(np.int64), s.view(np.int64)))
+                                for name, s in ends.items()} if ref is not None else {"env.step": False})
         rows.append(r)
     arrays = list(dev.st) + [dev.actions, dev.work, dev.reset_obs] + [a for s in dev.sets for part in s for a in part]
     for row in rows:
@@ -359,16 +366,21 @@ def report(a, argv, name, results, sim) -> list:
         for r in rows:
             cpu = r.get("CPU")
             same = r["same end state"]
-            body.append([env_id, f"{n:,}", r["text"], f"{100 * r['rare']:.2f} %", fmt(r["env.step"]),
-                         fmt(r["kernels alone"]), f"{r['env.step'] / r['kernels alone']:.2f}", fmt(r.get("graph replay")),
+            step, kern = r.get("env.step"), r.get("kernels alone")
+            body.append([env_id, f"{n:,}", r["text"], f"{100 * r['rare']:.2f} %", fmt(step),
+                         fmt(kern), f"{step / kern:.2f}" if step and kern else "-", fmt(r.get("graph replay")),
                          fmt(r.get("env + policy")), fmt(r.get("env + PPO")), fmt(cpu),
-                         "-" if cpu is None else f"{r['env.step'] / cpu:.1f}x",
+                         "-" if cpu is None or step is None else f"{step / cpu:.1f}x",
                          "yes" if all(same.values()) else "no: " + ", ".join(k for k, v in same.items() if not v)])
             labels = [variant_label(o) for o in VARIANTS]
             if any(lab in r for lab in labels):
                 var_rows.append([env_id, f"{n:,}", r["text"], f"{100 * r['rare']:.2f} %", fmt(r["kernels alone"])]
                                 + [fmt(r.get(lab)) for lab in labels])
     lines += table(heads, body)
+    errors = [f"- {env_id} N = {n:,}, {r['window']}, {col}: {err}" for (env_id, n), rows in results.items()
+              for r in rows for col, err in r.get("errors", {}).items()]
+    if errors:
+        lines += ["", "Columns that failed (shown as -):", "", *errors]
     first = next(iter(results.values()))[0]
     lines += ["", f"Device memory per env (state, buffers, two output sets): {first['bytes per env']:.0f} B at the first "
               f"id. Launches: " + ("prepared once (builder.PreparedLaunch)." if first["prepared"]
@@ -380,7 +392,7 @@ def report(a, argv, name, results, sim) -> list:
     lines += ["", "Targets (steady windows):"]
     for env_id in dict.fromkeys(k[0] for k in results):
         steady = [(r["env.step"], n, r) for (i, n), rows in results.items() if i == env_id for r in rows
-                  if r["window"] == "steady"]
+                  if r["window"] == "steady" and r.get("env.step") and r.get("kernels alone")]
         if not steady:
             continue
         best, n_best, r = max(steady, key=lambda v: v[0])

@@ -3,6 +3,7 @@ vector env and of penny_env.batch against the CPU backend, over rollouts with ma
 every scene preset and in every autoreset mode. Prints one JSON line per case; exits non-zero on the first
 mismatch."""
 import json
+import os
 import sys
 
 import numpy as np
@@ -17,7 +18,23 @@ CASES = [("ellipse", "impacts", "elastic"), ("stadium", "impacts", "plastic"), (
          ("rounded_rectangle", "impacts", "elastic"), ("plane", "reach", "elastic")]
 
 
-def rel_close(a, b, rel=1e-12):
+# Under numba's simulator the CUDA copies run the CPU's arithmetic: equal to 1e-12 (bitwise in fact, reported). On a
+# GPU, fused multiply-adds and libdevice's sin/cos differ from the CPU in the last bits (docs/gpu.md) and an impact
+# amplifies them: the states are compared to REL there, the discrete outputs (flags, impact counts and ends, limits)
+# must still be equal, and each case reports its largest relative difference.
+SIMULATED = os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
+REL = 1e-12 if SIMULATED else 1e-7
+
+
+def max_rel_diff(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.where(a == b, 0.0, np.abs(a - b) / np.maximum(np.abs(a), np.abs(b)))
+    return float(np.nanmax(d)) if d.size else 0.0
+
+
+def rel_close(a, b, rel=None):
+    rel = REL if rel is None else rel
     a, b = np.asarray(a, float), np.asarray(b, float)
     same = (a == b) | (np.isnan(a) & np.isnan(b))  # (also infinities: no impact found)
     with np.errstate(invalid="ignore"):
@@ -64,11 +81,12 @@ def vector_case(scene, task, law, n, steps, mode=AutoresetMode.NEXT_STEP, kernel
             assert np.array_equal(oc, og), f"step {k}: masked reset observations differ"
         impacts += int(ic["impacts"].sum())
         ends += int((ic["impact_ends"] != 0).sum())
-    assert rel_close(cpu.states, gpu.states), "final states differ"
+    worst = max_rel_diff(cpu.states, gpu.states)
+    assert rel_close(cpu.states, gpu.states), f"final states differ (largest relative difference {worst:.1e})"
     bitwise = bool(np.array_equal(cpu.states, gpu.states))
     return {"case": f"vector {scene} {task} {law} {mode.value} {kernels}" + (" one-set" if one_set else ""),
             "impacts": impacts, "resets": resets,
-            "episode_steps": episode_steps, "bitwise": bitwise}
+            "episode_steps": episode_steps, "bitwise": bitwise, "max_rel_diff": worst}
 
 
 def batch_case(table, law):
@@ -86,7 +104,8 @@ def batch_case(table, law):
     t2, e2 = pb.first_impact(S, np.zeros(2), np.full(n, 2.0), table=table, backend="cuda")
     assert np.array_equal(e1, e2) and rel_close(t1, t2)
     return {"case": f"batch {type(table).__name__} {law}", "impacts": int(a.impact_counts.sum()),
-            "bitwise": bool(np.array_equal(a.final_states, b.final_states))}
+            "bitwise": bool(np.array_equal(a.final_states, b.final_states)),
+            "max_rel_diff": max_rel_diff(a.final_states, b.final_states)}
 
 
 def main():
