@@ -10,15 +10,39 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def finished(runs, job, job_dir) -> bool:
-    """The job has a result, made with this very job (cell, agent, seed, budgets, hyperparameters, episodes):
-    a result of a job whose config has changed since is stale and runs again."""
+class DamagedResult(ValueError):
+    """A result.json that is not a job's result (truncated, not JSON, not an object with its job), named."""
+
+
+def read_result(path) -> dict:
+    """The result in ``path``; DamagedResult naming the file and the remedy when it is not a job's result."""
+    path = Path(path)
+    try:
+        result = json.loads(path.read_bytes().decode("utf-8"))
+    except (ValueError, OSError) as exc:  # (UnicodeDecodeError and JSONDecodeError are ValueErrors)
+        raise DamagedResult(f"{path} is damaged ({type(exc).__name__}: {exc}); delete it and the study reruns its "
+                            "job") from None
+    if not isinstance(result, dict) or not isinstance(result.get("job"), dict):
+        raise DamagedResult(f"{path} is damaged (it holds {type(result).__name__} {str(result)[:60]!r}, not a job's "
+                            "result with its job); delete it and the study reruns its job")
+    return result
+
+
+def result_of(runs, job, job_dir) -> dict | None:
+    """The job's result when it was made by this very job (cell, agent, seed, budgets, hyperparameters, episodes),
+    else None: a result of a job whose config has changed since is stale. DamagedResult for a damaged file."""
     path = job_dir(runs, job) / "result.json"
     if not path.is_file():
-        return False
+        return None
+    result = read_result(path)
+    return result if result["job"] == job else None
+
+
+def finished(runs, job, job_dir) -> bool:
+    """The job has a result made by this very job (result_of); a damaged or stale one runs again."""
     try:
-        return json.loads(path.read_text())["job"] == job
-    except (ValueError, KeyError, TypeError):  # unreadable: run it again
+        return result_of(runs, job, job_dir) is not None
+    except DamagedResult:
         return False
 
 

@@ -35,6 +35,7 @@ import argparse
 import csv
 import dataclasses
 import importlib
+import inspect
 import json
 import math
 import os
@@ -46,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from studies.cells import PROBE_TASKS, TABLE_NAMES, cell_spec
-from studies.jobs import check_ray, finished, run_jobs
+from studies.jobs import check_ray, finished, result_of, run_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -182,42 +183,17 @@ def demos_path(runs, cell) -> Path:
 
 def make_demos(runs, cell, pairs: int) -> Path:
     """Certified witness episodes of training seeds DEMO_SEED + j (never pair seeds) of ``cell``, replayed in the env
-    with their states recorded (training.protocol.save_demos). Made once per cell."""
-    import gymnasium as gym
-
-    from studies.witness import Witness
+    with their states recorded (studies/witness_demos.py, training.protocol.save_demos). Made once per cell; a cell
+    with no witness (the plane: theorems T2.3 and T3.2) gets an empty file, and the privileged agents start from the
+    task's own draws there."""
+    from studies.witness_demos import witness_demos
     from training.protocol import save_demos
     path = demos_path(runs, cell)
     if path.is_file():
         return path
     env_id, overrides = cell_spec(*cell)
-    w = Witness(env_id, overrides)
-    episodes = []
-    try:
-        for j in range(pairs):
-            pr = w.pair(DEMO_SEED + j)
-            if not pr.witnessed:
-                continue
-            env = gym.make(env_id, **overrides)
-            env.reset(seed=DEMO_SEED + j)
-            states, target = [env.unwrapped.state.copy()], env.unwrapped.target.copy()
-            for t, a in enumerate(pr.actions):
-                # float64, as the witness played them (a float32 cast changes the torques' last bits, and on a
-                # chaotic table the episode)
-                _, _, term, trunc, info = env.step(np.asarray(a, dtype=np.float64))
-                states.append(env.unwrapped.state.copy())
-                if term or trunc:
-                    break
-            env.close()
-            if not (t == len(pr.actions) - 1 and term and info["is_success"]):
-                raise RuntimeError(f"{cell} seed {DEMO_SEED + j}: the witness episode did not replay to its success "
-                                   f"(ended at action {t + 1} of {len(pr.actions)})")
-            episodes.append((np.array(states), target, np.array(pr.actions)))
-    finally:
-        w.close()
+    episodes = witness_demos(env_id, overrides, range(DEMO_SEED, DEMO_SEED + pairs))
     path.parent.mkdir(parents=True, exist_ok=True)
-    # no episode (the plane: no witness exists, theorems T2.3 and T3.2): an empty file, and the privileged agents
-    # start from the task's own draws there
     tmp = path.with_name(path.stem + ".tmp.npz")
     save_demos(tmp, episodes)
     tmp.replace(path)
@@ -248,7 +224,21 @@ def run_job(job: dict, runs: str) -> dict:
                      seed=job["seed"], total_timesteps=job["budget"], out=str(out), **extra)
     rows = []
     progress = out / "checkpoints.jsonl"
-    progress.unlink(missing_ok=True)
+    # an interrupted job goes on from the agent's checkpoint.pt when the same job wrote it (job.json), keeping the
+    # evaluations it made up to that step; else it starts again
+    resume = None
+    ckpt, stamp = out / "checkpoint.pt", out / "job.json"
+    takes_resume = "resume" in inspect.signature(module.train).parameters
+    if takes_resume and ckpt.is_file() and stamp.is_file() and _same_job(stamp, job) and progress.is_file():
+        import torch
+        at = int(torch.load(ckpt, weights_only=False)["state"]["global_step"])
+        rows = [r for r in map(json.loads, progress.read_text().splitlines()) if r["env_steps"] <= at]
+        resume = str(ckpt)
+    else:
+        for stale in (ckpt, progress, out / "progress.csv"):
+            stale.unlink(missing_ok=True)
+    stamp.write_text(json.dumps(job))
+    progress.write_text("".join(json.dumps(r) + "\n" for r in rows))
     t0, c0 = time.perf_counter(), time.process_time()
 
     def on_checkpoint(env_steps, policy):
@@ -259,9 +249,17 @@ def run_job(job: dict, runs: str) -> dict:
         with open(progress, "a") as f:
             f.write(json.dumps(row) + "\n")
 
-    train = module.train(args, checkpoints=job["checkpoints"], on_checkpoint=on_checkpoint, log=lambda *a: None)
+    kw = {"resume": resume} if takes_resume else {}
+    train = module.train(args, checkpoints=job["checkpoints"], on_checkpoint=on_checkpoint, log=lambda *a: None, **kw)
     return {"job": job, "checkpoints": rows, "train": {k: v for k, v in (train or {}).items() if _plain(v)},
             "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
+
+
+def _same_job(stamp: Path, job: dict) -> bool:
+    try:
+        return json.loads(stamp.read_text()) == job
+    except (ValueError, OSError):
+        return False
 
 
 def _plain(v) -> bool:
@@ -280,14 +278,17 @@ def witnessed_by_seed(cell, n: int, pairs_csv=DOCS / "witnesses_pairs.csv") -> n
     return np.array([got[s] for s in range(n)])
 
 
-def load_results(cfg, jobs, runs) -> dict:
-    """{(agent, cell tuple): [result of each seed that finished]}."""
-    out = {}
+def load_results(cfg, jobs, runs) -> tuple[dict, list]:
+    """({(agent, cell tuple): [result of each seed that finished]}, [folders holding a stale result]): only results
+    made by the config's own jobs count (studies/jobs.result_of); a damaged result.json stops the report, named."""
+    out, stale = {}, []
     for job in jobs:
-        path = job_dir(runs, job) / "result.json"
-        if path.is_file():
-            out.setdefault((job["agent"], tuple(job["cell"])), []).append(json.loads(path.read_text()))
-    return out
+        result = result_of(runs, job, job_dir)
+        if result is not None:
+            out.setdefault((job["agent"], tuple(job["cell"])), []).append(result)
+        elif (job_dir(runs, job) / "result.json").is_file():
+            stale.append(job_dir(runs, job))
+    return out, stale
 
 
 def csv_rows(cfg, results) -> list[dict]:
@@ -427,7 +428,7 @@ def answer_sentences(cfg, summary) -> list[str]:
 
 def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) -> Path:
     from studies.common import header
-    results = load_results(cfg, jobs, runs)
+    results, stale = load_results(cfg, jobs, runs)
     summary = summarize(cfg, results)
     check_theorems(summary)
     rows = csv_rows(cfg, results)
@@ -437,14 +438,14 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
         w.writeheader()
         w.writerows(rows)
     figures = write_figures(cfg, results, out)
-    done = sum((job_dir(runs, j) / "result.json").is_file() for j in jobs)
-    cpu = sum(json.loads((job_dir(runs, j) / "result.json").read_text())["cpu_seconds"] for j in jobs
-              if (job_dir(runs, j) / "result.json").is_file())
+    done = sum(len(res) for res in results.values())
+    cpu = sum(r.get("cpu_seconds", 0.0) for res in results.values() for r in res)
     lines = header("The agent ladder: learned agents on the single-input cells beside the certified witnesses",
                    "studies.ladder", list(argv))
     lines += [f"- jobs: {done} of {len(jobs)} finished ({cpu / 3600:.1f} CPU hours in the finished jobs; this "
               f"invocation {seconds:.0f} s); seeds per (agent, cell): {_seeds_words(cfg)} (the seeds column counts "
-              f"those finished); evaluation: one deterministic "
+              f"those finished)" + (f"; {len(stale)} result(s) in {runs} made by other job configs not counted "
+                                     f"(they rerun)" if stale else "") + "; evaluation: one deterministic "
               f"episode per pair seed 0..{cfg['eval_seeds'] - 1} (training/protocol.evaluate), the witness study's",
               "- privileged agents (PRIVILEGED below) reset their training envs to chosen states and learn from certified "
               f"witness episodes of training seeds {DEMO_SEED}+ (never the pair seeds); the others see only what the env "
@@ -565,15 +566,21 @@ def main(argv=None):
         ap.error(str(exc))
     jobs = make_jobs(cfg)
     t0 = time.perf_counter()
-    if not args.report_only:
-        todo = [j for j in jobs if not finished(runs, j, job_dir)]
-        print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already finished in {runs}", flush=True)
-        for cell in sorted({tuple(j["cell"]) for j in todo if j["privileged"]}):
-            make_demos(runs, cell, cfg["demos"]["pairs"])
-        if todo:
-            run_jobs(run_job, todo, runs, args.workers, job_dir, ray=args.ray)
-    path = write_report(cfg, jobs, runs, out, argv, time.perf_counter() - t0, quick=args.quick or out.resolve() !=
-                        (DOCS / "ladder.md").resolve())
+    from studies.jobs import DamagedResult
+    from training.run_folder import RunFolderError, run_lock
+    try:
+        if not args.report_only:
+            with run_lock(runs):  # (one study at a time in a runs folder: two would run the same jobs into it)
+                todo = [j for j in jobs if not finished(runs, j, job_dir)]
+                print(f"{len(jobs)} jobs, {len(jobs) - len(todo)} already finished in {runs}", flush=True)
+                for cell in sorted({tuple(j["cell"]) for j in todo if j["privileged"]}):
+                    make_demos(runs, cell, cfg["demos"]["pairs"])
+                if todo:
+                    run_jobs(run_job, todo, runs, args.workers, job_dir, ray=args.ray)
+        path = write_report(cfg, jobs, runs, out, argv, time.perf_counter() - t0,
+                            quick=args.quick or out.resolve() != (DOCS / "ladder.md").resolve())
+    except (RunFolderError, DamagedResult) as exc:
+        raise SystemExit(f"studies.ladder: error: {exc}") from None
     print(f"report: {path}")
     return path
 

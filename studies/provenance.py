@@ -128,10 +128,10 @@ REPORTS = {
                               + _ENV + _PHYSICS
                               + _TABLES),
     "docs/ladder.md": ("python -m studies.ladder",
-                       ("studies/ladder.py", "studies/cells.py", "configs/ladder/cpu.yaml", "configs/ladder/session.yaml",
-                        "training/protocol.py", "training/agent_side.py",
-                        "training/ppo_torch.py", "training/ppo_heading.py", "training/ppo_rnd.py", "training/her_sac.py",
-                        "training/start_curriculum.py", "training/go_explore.py", "penny_env/envs/vector_env.py")
+                       ("studies/ladder.py", "studies/cells.py", "configs/ladder/cpu.yaml", "studies/witness_demos.py",
+                        "training/protocol.py", "training/agent_side.py", "training/guides.py",
+                        "training/ppo_torch.py", "training/ppo_heading.py", "training/her_sac.py",
+                        "penny_env/envs/vector_env.py")
                        + _ENV + _PHYSICS + _TABLES),
     "docs/ppo_speed.md": ("python -m devtools.ppo_speed --out docs/ppo_speed.md",
                           ("devtools/ppo_speed.py", "training/ppo_torch.py", "studies/fair_pure_rl.py",

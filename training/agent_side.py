@@ -18,7 +18,7 @@ import torch.nn as nn
 
 KP, KD = 25.0, 10.0  # heading PD law [1/s^2, 1/s] (critically damped at 5 rad/s)
 KW = 40.0            # rolling-speed P law [1/s]
-V_MAX = 0.25         # [m/s] the drive head's largest commanded rolling speed
+V_MAX = 0.3          # [m/s] the drive head's largest commanded rolling speed
 FEATURES_DIM = 19
 
 
@@ -80,14 +80,19 @@ def decode(obs: torch.Tensor, k: TaskConsts):
     return px, py, v, w, px + dx, py + dy
 
 
+def speed_unit(k: TaskConsts) -> float:
+    """[m/s] the features' unit of rolling speed: park's speed tolerance; 0.1 m/s for reach (the drive head's speeds
+    are up to V_MAX)."""
+    return k.vtol if math.isfinite(k.vtol) else 0.1
+
+
 def features(obs: torch.Tensor, mem: torch.Tensor, k: TaskConsts, target: torch.Tensor | None = None):
     """(N, FEATURES_DIM) agent-side features from the observation, the agent's counters mem (N, 2) = (impacts seen in
     this episode, its clock in steps) and a target (N, 2) [m] (default: the observation's own)."""
     px, py, v, w, tx, ty = decode(obs, k)
     if target is not None:
         tx, ty = target[:, 0], target[:, 1]
-    vs = k.vtol if math.isfinite(k.vtol) else 0.01
-    vn = v / vs
+    vn = v / speed_unit(k)
     dx, dy = (tx - px) / k.L, (ty - py) / k.L
     d = torch.sqrt(dx * dx + dy * dy)
     c, s = obs[:, 4], obs[:, 5]
@@ -134,14 +139,27 @@ def to_env(obs: torch.Tensor, y: torch.Tensor, k: TaskConsts, head: str) -> torc
     if head == "torque":
         return y.clamp(-1, 1)
     if k.probe == "Steer":
+        return servo(obs, torch.atan2(y[:, 1], y[:, 0])[:, None], k)
+    return servo(obs, y[:, :1], k)
+
+
+def servo(obs: torch.Tensor, act: torch.Tensor, k: TaskConsts) -> torch.Tensor:
+    """The env's actions (N, n_act) from the agent's requests ``act``: one column per actuated control, in the
+    env's order (steering, then rolling): a world-frame heading psi [rad] that the agent's PD law on the observed
+    heading (obs 4, 5) and phi_dot (decoded obs 7) steers to; a rolling-speed request a (clipped to [-1, 1]) that
+    its P law on the decoded rolling speed (obs 6) drives to, a V_MAX [m/s]."""
+    cols, j = [], 0
+    if k.gain1:
         phi = torch.atan2(obs[:, 5], obs[:, 4])
-        psi = torch.atan2(y[:, 1], y[:, 0])
-        err = torch.remainder(psi - phi + math.pi, 2 * math.pi) - math.pi
+        err = torch.remainder(act[:, j] - phi + math.pi, 2 * math.pi) - math.pi
         w = atanh(obs[:, 7]) * k.s_phi
-        return ((KP * err - KD * w) / k.gain1).clamp(-1, 1)[:, None]
-    W = atanh(obs[:, 6]) * k.s_theta
-    v_cmd = y[:, 0].clamp(-1, 1) * V_MAX
-    return (KW * (v_cmd / k.R - W) / k.gain2).clamp(-1, 1)[:, None]
+        cols.append(((KP * err - KD * w) / k.gain1).clamp(-1, 1))
+        j += 1
+    if k.gain2:
+        W = atanh(obs[:, 6]) * k.s_theta
+        v_cmd = act[:, j].clamp(-1, 1) * V_MAX
+        cols.append((KW * (v_cmd / k.R - W) / k.gain2).clamp(-1, 1))
+    return torch.stack(cols, 1)
 
 
 def layer(i, o, std=math.sqrt(2)):

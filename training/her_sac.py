@@ -1,9 +1,10 @@
-"""her: goal-conditioned SAC with hindsight experience replay (Andrychowicz et al., NeurIPS 2017) over penny_env's
-native vector env, in one torch file (SB3's SAC with HerReplayBuffer runs at a few hundred env-steps/s here: too
-slow for 1e6 steps; this one steps a few hundred envs at once and trains on large batches).
+"""her: goal-conditioned SAC with hindsight experience replay (Andrychowicz et al., NeurIPS 2017) at the env's speed,
+in FastTD3's style (Seo et al. 2025, arXiv 2505.22642: thousands of parallel envs, large batches, LayerNorm critics,
+one gradient step per vector step), over penny_env's native vector env, in one torch file.
 
-    python -m training.her_sac --env-id PennyProbeSteer-Stadium-Elastic-v0 --total-timesteps 1000000 [--seed 0]
-                               [--set FIELD=VALUE ...] [--hp NAME=VALUE ...] [--quick] [--eval] [--out DIR]
+    python -m training.her_sac --env-id PennyProbeSteer-Stadium-Elastic-v0 --total-timesteps 2e7 [--seed 0]
+                               [--set FIELD=VALUE ...] [--hp NAME=VALUE ...] [--quick] [--eval]
+                               [--out DIR | --resume DIR]
 
 **What it may use (no privileged information).** The env's observation, its terminated/truncated flags and
 ``info["impacts"]``, and the cell's published constants (training/agent_side.TaskConsts: R, the tolerances, L, the
@@ -35,8 +36,13 @@ spin_tolerance (clipped); the agent's own clock and impact counter are features.
 actor outputs a heading (cos, sin) turned into the steering torque by the agent's PD law (steer), or a rolling speed
 turned into the rolling torque by its P law (drive), as in training/agent_side.to_env; "torque": the env's actions.
 
-**Recommended.** 256 envs, batch 2048, one gradient step per vector step (8 samples per transition), buffer 2048
-steps per env (524k transitions), gamma 0.98, lr 3e-4, 1e6 env steps per seed.
+**Scale** (the defaults): 2048 envs, batches of 8192, one gradient step per vector step (4 samples per
+transition), a replay of 1024 steps per env (2M transitions), 256-256 networks with LayerNorm in the critics, gamma
+0.98, lr 3e-4; 2e7 env steps per seed on the CPU (about 10k gradient steps). FastTD3's distributional critic is not
+used: its returns here are bounded by the goal reward's -1 / (1 - gamma).
+
+Command line and checkpoints: training/agent_cli.py (``checkpoint.pt`` holds the networks, the optimisers, the
+temperature and the step count; a resumed run starts a new replay memory, which refills from its own policy).
 """
 from __future__ import annotations
 
@@ -45,13 +51,15 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from . import agent_side as A
+from training import agent_side as A
+from training.agent_cli import Interrupted, non_negative, one_of, positive, unit_interval
 
 
 @dataclass
@@ -62,11 +70,11 @@ class Args:
     total_timesteps: int = 1_000_000
     torch_threads: int = 1
     out: str | None = None
-    num_envs: int = 256
-    batch_size: int = 2048
+    num_envs: int = 2048
+    batch_size: int = 8192
     updates_per_step: float = 1.0   # gradient steps per vector step (of num_envs env steps)
-    buffer_per_env: int = 2048      # ring buffer length per env
-    learning_starts: int = 25_000   # env steps of random actions before the first update
+    buffer_per_env: int = 1024      # ring buffer length per env
+    learning_starts: int = 200_000  # env steps of random actions before the first update
     gamma: float = 0.98
     tau: float = 0.005
     lr: float = 3e-4
@@ -78,6 +86,15 @@ class Args:
     val_every: int = 0              # env steps between validation evaluations (0: none)
     val_episodes: int = 200
     val_seed: int = 50_000
+    save_every: int = 2_000_000     # env steps between checkpoint.pt saves (with out)
+    quick: bool = False
+
+
+CHECKS = {"num_envs": positive, "batch_size": positive, "updates_per_step": non_negative, "buffer_per_env": positive,
+          "learning_starts": non_negative, "gamma": unit_interval, "tau": unit_interval, "lr": positive,
+          "hidden": positive, "her_k": non_negative, "alpha_init": positive, "head": one_of("pd", "torque"),
+          "train_seed": non_negative, "val_every": non_negative, "val_episodes": positive, "val_seed": non_negative,
+          "save_every": positive}
 
 
 # -- goals ---------------------------------------------------------------------------------------------
@@ -138,8 +155,11 @@ class Actor(nn.Module):
 class Critic(nn.Module):
     def __init__(self, n_in, n_act, h):
         super().__init__()
-        self.q1 = nn.Sequential(nn.Linear(n_in + n_act, h), nn.ReLU(), nn.Linear(h, h), nn.ReLU(), nn.Linear(h, 1))
-        self.q2 = nn.Sequential(nn.Linear(n_in + n_act, h), nn.ReLU(), nn.Linear(h, h), nn.ReLU(), nn.Linear(h, 1))
+
+        def q():
+            return nn.Sequential(nn.Linear(n_in + n_act, h), nn.LayerNorm(h), nn.ReLU(), nn.Linear(h, h),
+                                 nn.LayerNorm(h), nn.ReLU(), nn.Linear(h, 1))
+        self.q1, self.q2 = q(), q()
 
     def forward(self, x, a):
         xa = torch.cat([x, a], 1)
@@ -212,9 +232,12 @@ class HerBuffer:
 
 
 # -- training ------------------------------------------------------------------------------------------
-def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
+def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None) -> dict:
     """Trains for args.total_timesteps env steps (training/protocol.py): on_checkpoint(env_steps, policy) the first
-    time the env-step count reaches each of ``checkpoints`` and at the end."""
+    time the env-step count reaches each of ``checkpoints`` and at the end; ``resume``: a checkpoint.pt of this run
+    (training/agent_cli.py)."""
+    if args.quick:
+        args = quick_args(args)
     torch.set_num_threads(args.torch_threads)
     torch.manual_seed(args.seed)
     E = args.num_envs
@@ -232,19 +255,43 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
     opt_c = torch.optim.Adam(critic.parameters(), lr=args.lr)
     opt_al = torch.optim.Adam([log_alpha], lr=args.lr)
     buf = HerBuffer(E, args.buffer_per_env, vec.single_observation_space.shape[0], n_out, gdim)
+    out = Path(args.out) if args.out else None
+    nets = {"actor": actor, "critic": critic, "critic_t": critic_t, "opt_a": opt_a, "opt_c": opt_c, "opt_al": opt_al}
+    steps = updates = 0
+    started_at = 0
+    if resume is not None:
+        saved = torch.load(resume, weights_only=False)
+        for name, obj in nets.items():
+            obj.load_state_dict(saved[name])
+        with torch.no_grad():
+            log_alpha.copy_(saved["log_alpha"])
+        steps, updates, started_at = saved["steps"], saved["updates"], saved["steps"]
+        torch.set_rng_state(saved["torch_rng"])
+        log(f"[her_sac] resumed from {resume} at {steps:,} env steps (a new replay memory)")
 
-    obs_np, info = vec.reset(seed=args.train_seed + 1_000_000 * args.seed)
+    def save(path):
+        tmp = Path(str(path) + ".tmp")
+        torch.save({**{name: obj.state_dict() for name, obj in nets.items()}, "log_alpha": log_alpha.detach().clone(),
+                    "steps": steps, "updates": updates, "torch_rng": torch.get_rng_state()}, tmp)
+        tmp.replace(path)
+        return Path(path)
+
+    obs_np, info = vec.reset(seed=args.train_seed + 1_000_000 * args.seed + 1000 * (steps // E))
     obs = torch.tensor(obs_np)
     imp, clock = torch.zeros(E), torch.zeros(E)
     resetting = torch.zeros(E, dtype=torch.bool)  # NEXT_STEP: this step resets these envs (no transition)
-    pending = sorted(int(c) for c in checkpoints)
-    steps = updates = 0
+    pending = [c for c in sorted(int(c) for c in checkpoints) if c > steps]
+    save_next = (steps // args.save_every + 1) * args.save_every
     ep_succ, ep_n, recent = 0, 0, []
     curve = []
     t0 = time.perf_counter()
     t_upd = t_env = 0.0
     all_rows = torch.arange(E)
-    next_val = args.val_every if args.val_every else None
+    next_val = (steps // args.val_every + 1) * args.val_every if args.val_every else None
+    # the first learning_starts env steps are random actions, then one update per vector step: a resumed run learns
+    # from its first new step (its replay memory refills from the policy)
+    learn_from = args.learning_starts if resume is None else steps
+    owed_from = updates - (steps - learn_from) * args.updates_per_step / E
 
     called = []
 
@@ -253,104 +300,116 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print) -> dict:
             on_checkpoint(n, make_policy(actor, k, args.head))
         called.append(n)
 
-    while steps < args.total_timesteps:
-        mem = torch.stack([imp, clock], 1)
-        g = desired(obs, k)
-        with torch.no_grad():
-            if steps < args.learning_starts:
-                y = torch.rand(E, n_out) * 2 - 1
-            else:
-                y = actor(goal_features(obs, mem, g, k))[0]
-        te = time.perf_counter()
-        nobs_np, _, term, trunc, info = vec.step(A.to_env(obs, y, k, args.head).numpy())
-        t_env += time.perf_counter() - te
-        nobs = torch.tensor(nobs_np)
-        term_t, trunc_t = torch.as_tensor(term), torch.as_tensor(trunc)
-        nimp = imp + torch.as_tensor(np.asarray(info["impacts"]), dtype=torch.float32)
-        nmem = torch.stack([nimp, clock + 1], 1)
-        live = ~resetting
-        ended = (term_t | trunc_t) & live
-        rows = all_rows[live]
-        buf.add(rows, obs[live], mem[live], y[live], nobs[live], nmem[live], g[live], achieved(nobs, k)[live],
-                ended[live])
-        n_live = int(live.sum())
-        if ended.any():
-            s = np.asarray(info["is_success"], bool)[ended.numpy()]
-            recent.extend(s.tolist())
-            ep_succ += int(s.sum())
-            ep_n += int(ended.sum())
-            recent = recent[-1000:]
-        imp = torch.where(ended | resetting, torch.zeros(E), nimp)
-        clock = torch.where(ended | resetting, torch.zeros(E), clock + 1)
-        resetting = ended.clone()
-        obs = nobs
-        steps += n_live
-        # gradient steps
-        if steps >= args.learning_starts and buf.size() >= args.batch_size and buf.written.min() > 0:
-            tu = time.perf_counter()
-            owed = args.updates_per_step * (steps - args.learning_starts) / E
-            n_up = max(0, int(owed) - updates)
-            for _ in range(n_up):
-                o, m, a, no, nm, gg, done = buf.sample(args.batch_size, args.her_k, k)
-                x, nx = goal_features(o, m, gg, k), goal_features(no, nm, gg, k)
-                r = done.float() - 1.0
-                alpha = log_alpha.exp().detach()
-                with torch.no_grad():
-                    na, nlp, _ = actor(nx)
-                    q1t, q2t = critic_t(nx, na)
-                    target = r + args.gamma * (1 - done.float()) * (torch.min(q1t, q2t) - alpha * nlp)
-                    target = target.clamp(-1.0 / (1 - args.gamma), 0.0)
-                q1, q2 = critic(x, a)
-                lc = F.mse_loss(q1, target) + F.mse_loss(q2, target)
-                opt_c.zero_grad()
-                lc.backward()
-                opt_c.step()
-                pa, lp, _ = actor(x)
-                q1p, q2p = critic(x, pa)
-                la = (alpha * lp - torch.min(q1p, q2p)).mean()
-                opt_a.zero_grad()
-                la.backward()
-                opt_a.step()
-                lal = -(log_alpha * (lp.detach() + target_entropy)).mean()
-                opt_al.zero_grad()
-                lal.backward()
-                opt_al.step()
-                with torch.no_grad():
-                    for p_, pt in zip(critic.parameters(), critic_t.parameters()):
-                        pt.mul_(1 - args.tau).add_(args.tau * p_)
-                updates += 1
-            t_upd += time.perf_counter() - tu
-        if pending and steps >= pending[0]:
-            while pending and steps >= pending[0]:
-                pending.pop(0)
-            checkpoint(steps)
-        if next_val is not None and steps >= next_val:
-            next_val += args.val_every
-            val = A.validate(make_policy(actor, k, args.head), args.env_id, args.env_kwargs, args.val_episodes,
-                             args.val_seed)
-            wall = time.perf_counter() - t0
-            curve.append((steps, val))
-            log(f"her {args.env_id} seed {args.seed}: {steps:,} steps, {wall:.0f} s, {steps / wall:,.0f} steps/s, "
-                f"train success (last 1000 episodes) {np.mean(recent) if recent else 0:.3f}, validation {val:.3f}, "
-                f"alpha {log_alpha.exp().item():.3g}, updates {updates}")
+    try:
+        while steps < args.total_timesteps:
+            mem = torch.stack([imp, clock], 1)
+            g = desired(obs, k)
+            with torch.no_grad():
+                if steps < learn_from:
+                    y = torch.rand(E, n_out) * 2 - 1
+                else:
+                    y = actor(goal_features(obs, mem, g, k))[0]
+            te = time.perf_counter()
+            nobs_np, _, term, trunc, info = vec.step(A.to_env(obs, y, k, args.head).numpy())
+            t_env += time.perf_counter() - te
+            nobs = torch.tensor(nobs_np)
+            term_t, trunc_t = torch.as_tensor(term), torch.as_tensor(trunc)
+            nimp = imp + torch.as_tensor(np.asarray(info["impacts"]), dtype=torch.float32)
+            nmem = torch.stack([nimp, clock + 1], 1)
+            live = ~resetting
+            ended = (term_t | trunc_t) & live
+            rows = all_rows[live]
+            buf.add(rows, obs[live], mem[live], y[live], nobs[live], nmem[live], g[live], achieved(nobs, k)[live],
+                    ended[live])
+            n_live = int(live.sum())
+            if ended.any():
+                s = np.asarray(info["is_success"], bool)[ended.numpy()]
+                recent.extend(s.tolist())
+                ep_succ += int(s.sum())
+                ep_n += int(ended.sum())
+                recent = recent[-1000:]
+            imp = torch.where(ended | resetting, torch.zeros(E), nimp)
+            clock = torch.where(ended | resetting, torch.zeros(E), clock + 1)
+            resetting = ended.clone()
+            obs = nobs
+            steps += n_live
+            # gradient steps
+            if steps >= learn_from and buf.size() >= args.batch_size and buf.written.min() > 0:
+                tu = time.perf_counter()
+                owed = owed_from + args.updates_per_step * (steps - learn_from) / E
+                n_up = max(0, int(owed) - updates)
+                for _ in range(n_up):
+                    o, m, a, no, nm, gg, done = buf.sample(args.batch_size, args.her_k, k)
+                    x, nx = goal_features(o, m, gg, k), goal_features(no, nm, gg, k)
+                    r = done.float() - 1.0
+                    alpha = log_alpha.exp().detach()
+                    with torch.no_grad():
+                        na, nlp, _ = actor(nx)
+                        q1t, q2t = critic_t(nx, na)
+                        target = r + args.gamma * (1 - done.float()) * (torch.min(q1t, q2t) - alpha * nlp)
+                        target = target.clamp(-1.0 / (1 - args.gamma), 0.0)
+                    q1, q2 = critic(x, a)
+                    lc = F.mse_loss(q1, target) + F.mse_loss(q2, target)
+                    opt_c.zero_grad()
+                    lc.backward()
+                    opt_c.step()
+                    pa, lp, _ = actor(x)
+                    q1p, q2p = critic(x, pa)
+                    la = (alpha * lp - torch.min(q1p, q2p)).mean()
+                    opt_a.zero_grad()
+                    la.backward()
+                    opt_a.step()
+                    lal = -(log_alpha * (lp.detach() + target_entropy)).mean()
+                    opt_al.zero_grad()
+                    lal.backward()
+                    opt_al.step()
+                    with torch.no_grad():
+                        for p_, pt in zip(critic.parameters(), critic_t.parameters()):
+                            pt.mul_(1 - args.tau).add_(args.tau * p_)
+                    updates += 1
+                t_upd += time.perf_counter() - tu
+            if pending and steps >= pending[0]:
+                while pending and steps >= pending[0]:
+                    pending.pop(0)
+                checkpoint(steps)
+            if next_val is not None and steps >= next_val:
+                next_val += args.val_every
+                val = A.validate(make_policy(actor, k, args.head), args.env_id, args.env_kwargs, args.val_episodes,
+                                 args.val_seed)
+                wall = time.perf_counter() - t0
+                curve.append((steps, val))
+                log(f"her {args.env_id} seed {args.seed}: {steps:,} steps, {wall:.0f} s, "
+                    f"{(steps - started_at) / wall:,.0f} steps/s, train success (last 1000 episodes) "
+                    f"{np.mean(recent) if recent else 0:.3f}, validation {val:.3f}, alpha {log_alpha.exp().item():.3g}, "
+                    f"updates {updates}")
+            if out is not None and steps >= save_next:
+                while save_next <= steps:
+                    save_next += args.save_every
+                save(out / "checkpoint.pt")
+    except KeyboardInterrupt:
+        vec.close()
+        raise Interrupted(steps, save(out / "checkpoint.pt") if out is not None and steps > started_at else None) \
+            from None
     vec.close()
     wall = time.perf_counter() - t0
     checkpoint(steps)
-    return {"env_steps": steps, "wall_time_s": wall, "steps_per_s": steps / wall, "updates": updates,
+    if out is not None:
+        save(out / "checkpoint.pt")
+    return {"env_steps": steps, "wall_time_s": wall, "steps_per_s": (steps - started_at) / wall, "updates": updates,
             "env_s": t_env, "update_s": t_upd, "train_episodes": ep_n, "train_successes": ep_succ,
-            "validation_curve": curve, "actor": actor.state_dict()}
+            "validation_curve": curve}
 
 
 def quick_args(args: Args) -> Args:
     """--quick: seconds on a few envs (checks the pipeline, learns nothing)."""
     return dataclasses.replace(args, num_envs=16, batch_size=64, hidden=32, learning_starts=256, buffer_per_env=64,
-                               total_timesteps=2048)
+                               total_timesteps=min(args.total_timesteps, 2048), quick=True)
 
 
 def main(argv=None):
-    """The command line every ladder agent shares (training.protocol.cli)."""
-    from training.protocol import cli
-    return cli("training.her_sac", Args, train, argv, quick_args)
+    """The command line every ladder agent shares (training/agent_cli.py)."""
+    from training.agent_cli import cli
+    return cli("training.her_sac", Args, train, argv, quick_args, CHECKS)
 
 
 if __name__ == "__main__":

@@ -105,6 +105,33 @@ def test_quick_run_writes_its_report_outside_docs(reports_untouched):
     ladder.main(["--quick", "--workers", "1", "--runs", str(reports_untouched / "runs")])
     assert result.stat().st_mtime_ns == stamp and json.loads(result.read_text())["checkpoints"]
     assert np.isfinite(float(rows[-1]["successes"]))
+    # --report-only counts only the results made by this config's jobs: after a change they are stale, not reported
+    runs = reports_untouched / "runs"
+    changed = reports_untouched / "changed.yaml"
+    changed.write_text(ladder.QUICK_CONFIG.read_text().replace("budget: {Steer: 4096}", "budget: {Steer: 100000}"))
+    out2 = ladder.main(["--config", str(changed), "--quick", "--runs", str(runs), "--report-only",
+                        "--out", str(reports_untouched / "changed.md")])
+    text = Path(out2).read_text()
+    assert "jobs: 0 of 6 finished" in text and "6 result(s)" in text and "### Steer-stadium-elastic" not in text
+    # a damaged result.json stops the report, naming the file
+    result.write_bytes(result.read_bytes()[:40])
+    with pytest.raises(SystemExit, match=f"{result}.*damaged.*delete it"):
+        ladder.main(["--quick", "--runs", str(runs), "--report-only"])
+    # two studies never run in one runs folder at once
+    from filelock import FileLock
+    with FileLock(str(runs / ".lock")):
+        with pytest.raises(SystemExit, match="another training run is writing"):
+            ladder.main(["--quick", "--workers", "1", "--runs", str(runs)])
+
+
+@pytest.mark.parametrize("content", [b"", b"null", b"[1, 2]", b"\xff\xfe\x00garbage", b'{"checkpoints": []}'])
+def test_a_damaged_result_is_named(tmp_path, content):
+    from studies.jobs import DamagedResult, finished, read_result
+    path = tmp_path / "result.json"
+    path.write_bytes(content)
+    with pytest.raises(DamagedResult, match=f"{path} is damaged"):
+        read_result(path)
+    assert not finished(tmp_path, {}, lambda runs, job: tmp_path)  # (a run reruns the job)
 
 
 def test_an_agent_may_have_its_own_seeds_and_cells(tmp_path):

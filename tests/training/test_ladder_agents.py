@@ -10,7 +10,8 @@ import pytest
 torch = pytest.importorskip("torch", reason="torch is not installed (the penny-env[train] extra)")
 pytest.importorskip("torch.utils.tensorboard", reason="tensorboard is not installed (the penny-env[train] extra)")
 
-from training import ppo_heading, ppo_rnd, ppo_torch  # noqa: E402
+from training import agent_side as A  # noqa: E402
+from training import ppo_heading, ppo_torch  # noqa: E402
 from training.protocol import evaluate  # noqa: E402
 
 STADIUM = "PennyProbeSteer-Stadium-Elastic-v0"
@@ -22,14 +23,14 @@ def _args(agent, env_id, tmp_path, **changes):
     fields = {**TINY, "env_id": env_id, "out": str(tmp_path / agent), **changes}
     if agent == "ppo":
         return ppo_torch.ladder_args(**fields)
-    return {"ppo_heading": ppo_heading, "ppo_rnd": ppo_rnd}[agent].Args(**fields)
+    return ppo_heading.Args(**fields)
 
 
 def _train(agent, args, **kw):
-    return {"ppo": ppo_torch, "ppo_heading": ppo_heading, "ppo_rnd": ppo_rnd}[agent].train(args, **kw)
+    return {"ppo": ppo_torch, "ppo_heading": ppo_heading}[agent].train(args, **kw)
 
 
-@pytest.mark.parametrize("agent, env_id", [("ppo", STADIUM), ("ppo_heading", STADIUM), ("ppo_rnd", STADIUM),
+@pytest.mark.parametrize("agent, env_id", [("ppo", STADIUM), ("ppo_heading", STADIUM),
                                            ("ppo_heading", "PennyProbeDrive-Stadium-Elastic-v0"),
                                            ("ppo_heading", "PennyProbeBoth-Stadium-Elastic-v0")])
 def test_tiny_run_follows_the_protocol(agent, env_id, tmp_path):
@@ -48,7 +49,7 @@ def test_tiny_run_follows_the_protocol(agent, env_id, tmp_path):
     assert a == b
 
 
-@pytest.mark.parametrize("agent", ["ppo", "ppo_heading", "ppo_rnd"])
+@pytest.mark.parametrize("agent", ["ppo", "ppo_heading"])
 def test_no_success_on_the_plane(agent, tmp_path):
     """The negative control: theta_dot is conserved on the plane under steering alone (T2.3), so no park can
     succeed there; a success would be a bug."""
@@ -70,12 +71,10 @@ def test_ppo_torch_ladder_configuration():
 
 
 def test_ppo_heading_policy_keeps_its_own_clock_and_impact_count():
-    import gymnasium as gym
-    env = gym.make_vec(STADIUM, 2, vectorization_mode="vector_entry_point").unwrapped
-    k = ppo_heading.Consts(env)
-    env.close()
-    assert k.heads == ("steer",) and k.park and k.max_steps == 400 and math.isclose(k.gain1, 10.0)
-    agent = ppo_heading.Agent(k.heads, 8, 0.5, 0.05, 1.0)
+    k = A.TaskConsts.of(A.make_vec(STADIUM, 2))
+    assert (k.gain1 != 0, k.gain2 != 0) == (True, False) and k.park and k.max_steps == 400
+    assert math.isclose(k.gain1, 10.0)
+    agent = ppo_heading.Agent(k, 8, 0.5, 0.05, 1.0, layer_norm=True)
     policy = ppo_heading.HeadingPolicy(agent, k)
     policy.reset(2)
     obs = np.zeros((2, 10), np.float32)
@@ -89,24 +88,20 @@ def test_ppo_heading_policy_keeps_its_own_clock_and_impact_count():
     assert policy.mem.shape == (3, 2) and not policy.mem.any()
 
 
-def test_ppo_heading_servo_laws_and_potentials():
-    import gymnasium as gym
-    env = gym.make_vec("PennyProbeBoth-Stadium-Elastic-v0", 1, vectorization_mode="vector_entry_point").unwrapped
-    k = ppo_heading.Consts(env)
-    env.close()
-    assert k.heads == ("steer", "drive")
+def test_the_servo_laws_and_the_park_potential():
+    k = A.TaskConsts.of(A.make_vec("PennyProbeBoth-Stadium-Elastic-v0", 1))
     obs = torch.zeros(3, 10)
     obs[:, 4] = 1.0  # heading phi = 0, at rest, on the target
     act = torch.tensor([[0.0, 0.0], [0.1, 0.0], [0.0, 0.5]])  # (heading psi, speed request / V_MAX)
-    u = ppo_heading.env_action(obs, act, k, k.heads)
+    u = A.servo(obs, act, k)
     assert u[0].tolist() == [0.0, 0.0]
-    assert math.isclose(float(u[1, 0]), ppo_heading.KP * 0.1 / k.gain1, rel_tol=1e-6) and u[1, 1] == 0
+    assert math.isclose(float(u[1, 0]), A.KP * 0.1 / k.gain1, rel_tol=1e-6) and u[1, 1] == 0
     assert u[2, 0] == 0 and u[2, 1] == 1.0  # a speed request far above the current speed: full torque
     # park: at rest on the target the potential is its largest (0); far and fast it is its lowest
-    assert float(ppo_heading.park_potential(obs[:1], k, 0.5)) == 0.0
+    assert float(A.potential(obs[:1], k, 0.5)) == 0.0
     far = obs[:1].clone()
     far[:, 6], far[:, 8] = 0.5, 1.5
-    assert float(ppo_heading.park_potential(far, k, 0.5)) < -3.0
+    assert float(A.potential(far, k, 0.5)) < -3.0
 
 
 def test_ppo_speed_quick(tmp_path, capsys):

@@ -1,7 +1,8 @@
-"""The ladder's goal-conditioned and privileged agents of issue 36 (training/her_sac.py, start_curriculum.py,
-go_explore.py): each tiny run follows the protocol (training/protocol.py: checkpoints at the first env-step count
-that reaches each, a deterministic Policy that evaluate() runs, success in [0, 1]), the privileged ones never draw
-the evaluation's or the validation's seeds, and nothing succeeds on the plane (theorems T2.3, T3.2)."""
+"""The ladder's goal-conditioned agent (training/her_sac.py) and its witness-guided PRIVILEGED agents (training/
+ppo_heading.py with a guide, training/guides.py): each tiny run follows the protocol (training/protocol.py:
+checkpoints at the first env-step count that reaches each, a deterministic Policy that evaluate() runs, success in
+[0, 1]) and never draws the evaluation's seeds; a guided episode replays its witness bit for bit until the hand-over;
+the schedules move the hand-over back as the learner succeeds."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,7 +12,7 @@ import pytest
 
 from penny_env.envs.vector_env import PennyVectorEnv
 from training import agent_side as A
-from training import go_explore, her_sac, start_curriculum
+from training import guides, her_sac, ppo_heading
 from training.protocol import evaluate, load_demos, save_demos
 
 STEER = "PennyProbeSteer-Stadium-Elastic-v0"
@@ -19,7 +20,8 @@ DRIVE = "PennyProbeDrive-Ellipse-Plastic-v0"
 VAL = range(50_000, 50_006)  # (a few validation seeds: never the evaluation's 0..199)
 
 TINY_HER = dict(num_envs=16, batch_size=64, hidden=32, learning_starts=256, buffer_per_env=64, torch_threads=1)
-TINY_CUR = dict(num_envs=16, num_steps=8, minibatch=64, epochs=1, torch_threads=1)
+TINY_GUIDED = dict(num_envs=16, num_steps=8, minibatch_size=64, update_epochs=1, torch_threads=1, val_every=0,
+                   guide_min_episodes=2)
 
 
 @pytest.fixture
@@ -113,67 +115,78 @@ def test_witness_demos_refuse_evaluation_seeds():
         witness_demos(DRIVE, {}, [199])
 
 
-def test_curriculum_protocol_and_seeds(tmp_path, seeds_drawn):
+@pytest.mark.parametrize("schedule", guides.SCHEDULES)
+def test_guided_ppo_follows_the_protocol_and_never_draws_evaluation_seeds(tmp_path, seeds_drawn, schedule):
     path, eps = _tiny_demos(tmp_path, DRIVE)
     assert len(eps) >= 1
     d = load_demos(path)
     assert d["length"].sum() + len(d["length"]) == len(d["states"])
-    args = start_curriculum.Args(env_id=DRIVE, demos=str(path), total_timesteps=1200, **TINY_CUR)
+    args = ppo_heading.Args(env_id=DRIVE, demos=str(path), guide=schedule, total_timesteps=1200, **TINY_GUIDED)
     seeds_drawn.clear()
-    res, _ = _protocol_run(start_curriculum.train, args, [100, 600], args.num_envs * args.num_steps)
-    assert res["demos"] == len(eps) and res["demos_replayed_exactly"] == len(eps)
+    res, _ = _protocol_run(ppo_heading.train, args, [100, 600], args.num_envs * args.num_steps)
+    assert 0 <= res["guide_frac"] <= 1
     assert seeds_drawn and all(s >= 10_000_000 for s in seeds_drawn if s not in VAL)
+    with pytest.raises(ValueError, match="needs demos"):
+        ppo_heading.train(dataclasses.replace(args, demos=None))
 
 
-def test_curriculum_moves_starts_back():
-    rng = np.random.default_rng(0)
-    cur = start_curriculum.Curriculum([20, 9], back=4, threshold=0.2, min_episodes=5, rng=rng)
-    assert list(cur.k) == [16, 5]
-    j, start, stage = cur.draw(100)
-    assert set(j) == {0, 1} and (start <= cur.k[j]).all() and (start > cur.k[j] - 4).all()
-    cur.record(np.zeros(5, int), np.zeros(5, int), np.array([1, 0, 0, 0, 0], bool))  # 20 %: move back
-    assert cur.k[0] == 12 and cur.stage[0] == 1
-    cur.record(np.zeros(5, int), np.zeros(5, int), np.ones(5, bool))  # an older stage's outcomes: ignored
-    assert cur.k[0] == 12
-    cur.record(np.ones(5, int), np.zeros(5, int), np.array([0, 0, 0, 0, 1], bool))
-    cur.record(np.ones(5, int), np.ones(5, int), np.array([1, 1, 0, 0, 0], bool))
-    assert cur.k[1] == 0 and not cur.done[1]
-    cur.record(np.ones(5, int), np.full(5, 2), np.ones(5, bool))
-    assert cur.done[1]
+def test_a_guided_episode_is_its_witness_until_the_hand_over(tmp_path):
+    _, eps = _tiny_demos(tmp_path, DRIVE)
+    path = tmp_path / "demos.npz"
+    demos = load_demos(path)
+    vec = A.make_vec(DRIVE, 3)
+    vec.reset(seed=10_000_000)
+    g = guides.Guide(demos, 3, np.random.default_rng(0), "jsrl", step=0.0, p_own=0.0)
+    g.frac[:] = 1.0  # hand over at the last step
+    rows = np.arange(3)
+    S, G, guided = g.start(rows)
+    assert guided.all()
+    vec.reset(options={"state": S, "target": G, "reset_mask": np.ones(3, bool)})
+    h = g.left.copy()
+    assert (h == [len(eps[j][2]) - 1 for j in g.demo]).all()
+    for t in range(int(h.max())):
+        act = np.zeros((3, 1))
+        on = g.actions(act)
+        assert (on == (t < h)).all()
+        vec.step(act)
+        g.advance()
+        for i in np.flatnonzero(on):
+            assert np.array_equal(vec.states[i], eps[g.demo[i]][0][t + 1])  # (bit for bit: float64 actions)
 
 
-def test_go_explore_protocol_and_seeds(seeds_drawn):
-    args = go_explore.Args(env_id=DRIVE, total_timesteps=3000, explore_steps=1000, pairs=4, num_envs=16, segment=8,
-                           curriculum=TINY_CUR)
-    args = dataclasses.replace(args, num_envs=16)
-    res, calls = _protocol_run(go_explore.train, args, [500, 1500], 16 * 8)
-    assert calls[0][0] == 500  # (passed by the exploration: the initial policy)
-    assert res["explore_steps"] >= 1000 and res["cells"] >= 4
-    assert all(s >= 10_000_000 for s in seeds_drawn if s not in VAL)
-    with pytest.raises(ValueError, match="go_seed"):
-        go_explore.train(dataclasses.replace(args, go_seed=7))
+def test_the_jsrl_schedule_moves_the_hand_over_back_for_every_demonstration():
+    demos = {"states": np.zeros((12, 6)), "targets": np.zeros((12, 2)), "episode": np.repeat([0, 1], [5, 7]),
+             "step": np.r_[np.arange(5), np.arange(7)], "length": np.array([4, 6]), "actions": np.zeros((10, 1))}
+    g = guides.Guide(demos, 4, np.random.default_rng(0), "jsrl", step=0.5, threshold=0.5, min_episodes=4, p_own=0.0)
+    g.start(np.arange(4))
+    assert (g.left == np.round(0.5 * g.T[g.demo])).all()
+    g.record(np.arange(4), np.array([1, 1, 0, 0], bool))  # 2 of 4 at f = 0.5: the hand-over moves to f = 0
+    assert (g.frac == 0).all() and (g.stage == 1).all()
+    g.start(np.arange(2))
+    g.record(np.arange(2), np.ones(2, bool))  # (episodes of stage 1, too few yet)
+    assert not g.finished()
+    g.demo[2:] = 0
+    g.demo_stage[2:] = 0
+    g.record(np.arange(2, 4), np.ones(2, bool))  # outcomes of an older stage: ignored
+    assert not g.finished()
+    g.start(np.arange(4))
+    assert (g.left == 0).all()  # at f = 0 the demonstration only picks the start
+    g.record(np.arange(4), np.ones(4, bool))
+    assert g.finished() and g.start(np.arange(4))[2].sum() == 0  # the final stage: the task's own starts
 
 
-def test_go_explore_certifies_its_trajectories():
-    """The archive's successes replay to success from the pair's start (drive reach: easy to hit by chance)."""
-    args = go_explore.Args(env_id="PennyProbeDrive-Stadium-Elastic-v0", explore_steps=6000, pairs=3, num_envs=32,
-                           segment=20)
-    arch, solved, starts, steps, stats = go_explore.explore(args, log=lambda s: None)
-    eps = go_explore.certify(args.env_id, {}, arch, solved, starts, args.go_seed)
-    assert len(eps) == len(solved)
-    for states, target, actions in eps:
-        assert len(states) == len(actions) + 1
-        assert np.hypot(*(states[-1][:2] - target)) < 0.015
-
-
-@pytest.mark.parametrize("env_id", ["PennyProbeSteer-Plane-v0", "PennyProbeDrive-Plane-v0"])
-def test_plane_negative_control(env_id):
-    """No success on the plane (theorems T2.3, T3.2): in training, in exploration, in the evaluation."""
-    res = her_sac.train(her_sac.Args(env_id=env_id, total_timesteps=1500, **TINY_HER))
-    assert res["train_successes"] == 0
-    args = go_explore.Args(env_id=env_id, total_timesteps=2500, explore_steps=1500, pairs=4, num_envs=16, segment=8,
-                           curriculum=TINY_CUR)
-    seen = []
-    res = go_explore.train(args, checkpoints=[2000], on_checkpoint=lambda n, p: seen.append(
-        evaluate(p, env_id, seeds=VAL)["successes"]))
-    assert res["solved"] == 0 and res["demos"] == 0 and seen == [0, 0]
+def test_the_curriculum_moves_each_start_back_and_drops_the_unsolved():
+    demos = {"states": np.zeros((12, 6)), "targets": np.zeros((12, 2)), "episode": np.repeat([0, 1], [5, 7]),
+             "step": np.r_[np.arange(5), np.arange(7)], "length": np.array([4, 6]), "actions": np.zeros((10, 1))}
+    g = guides.Guide(demos, 2, np.random.default_rng(0), "curriculum", step=0.5, threshold=0.5, min_episodes=2,
+                     p_own=0.0, give_up=3)
+    for _ in range(3):  # demonstration 1 never solved: dropped after give_up episodes
+        g.demo[:], g.demo_stage[:] = [1, 1], 0
+        g.record(np.arange(2), np.zeros(2, bool))
+    assert g.dropped.tolist() == [False, True] and g.frac[1] == 0.5
+    g.demo[:], g.demo_stage[:] = [0, 0], 0
+    g.record(np.arange(2), np.array([1, 0], bool))  # half of two: moves back
+    assert g.frac[0] == 0.0 and g.stage[0] == 1
+    g.demo[:], g.demo_stage[:] = [0, 0], 1
+    g.record(np.arange(2), np.ones(2, bool))  # solved from its start: done
+    assert g.done[0] and g.finished()
