@@ -54,6 +54,7 @@ DOCS = ROOT / "docs"
 DEFAULT_CONFIG = ROOT / "configs" / "ladder" / "cpu.yaml"
 QUICK_CONFIG = ROOT / "configs" / "ladder" / "quick.yaml"
 KEYS = {"eval_seeds", "seeds", "first_checkpoint", "cells", "agents", "demos"}
+OPTIONAL_KEYS = {"fall"}  # fall: {before: AGENT, after: AGENT}: their learning diagnostics side by side
 AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label", "seeds", "cells"}
 DEMO_SEED = 100_000      # demonstrations: witness episodes of seeds DEMO_SEED + j
 README_BEGIN = "<!-- ladder-answer: written by python -m studies.ladder (studies/ladder.py) -->"
@@ -70,9 +71,10 @@ def load_config(path) -> dict:
     cfg = safe_load(read_text(path, "ladder config"))
     if not isinstance(cfg, dict):
         raise ValueError(f"{path}: a ladder config must be a mapping")
-    unknown, missing = sorted(set(cfg) - KEYS), sorted(KEYS - set(cfg))
+    unknown, missing = sorted(set(cfg) - KEYS - OPTIONAL_KEYS), sorted(KEYS - set(cfg))
     if unknown or missing:
-        raise ValueError(f"{path}: unknown key(s) {unknown}, missing key(s) {missing}; keys: {sorted(KEYS)}")
+        raise ValueError(f"{path}: unknown key(s) {unknown}, missing key(s) {missing}; keys: {sorted(KEYS)} and "
+                         f"optionally {sorted(OPTIONAL_KEYS)}")
     for key in ("eval_seeds", "first_checkpoint"):
         if isinstance(cfg[key], bool) or not isinstance(cfg[key], int) or cfg[key] < 1:
             raise ValueError(f"{path}: {key} must be a positive integer, got {cfg[key]!r}")
@@ -125,6 +127,10 @@ def load_config(path) -> dict:
         bad = sorted(set(a.get("args") or {}) - names)
         if bad:
             raise ValueError(f"{path}: agents.{name}.args: {bad} are not fields of {a['module']}.Args")
+    fall = cfg.get("fall")
+    if fall is not None and not (isinstance(fall, dict) and set(fall) == {"before", "after"}
+                                 and all(v in cfg["agents"] for v in fall.values())):
+        raise ValueError(f"{path}: fall must be {{before: AGENT, after: AGENT}} with two of the config's agents")
     d = cfg["demos"]
     if not isinstance(d, dict) or set(d) != {"pairs"} or isinstance(d["pairs"], bool) or not isinstance(d["pairs"], int):
         raise ValueError(f"{path}: demos must be {{pairs: N}} (witness episodes per cell for the privileged agents)")
@@ -251,8 +257,13 @@ def run_job(job: dict, runs: str) -> dict:
 
     kw = {"resume": resume} if takes_resume else {}
     train = module.train(args, checkpoints=job["checkpoints"], on_checkpoint=on_checkpoint, log=lambda *a: None, **kw)
-    return {"job": job, "checkpoints": rows, "train": {k: v for k, v in (train or {}).items() if _plain(v)},
-            "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
+    train = dict(train or {})
+    result = {"job": job, "checkpoints": rows, "train": {k: v for k, v in train.items() if _plain(v)},
+              "val_curve": [list(map(float, c)) for c in train.get("val_curve", [])]}
+    if train.get("final_policy") is not None:  # the last update's policy, beside the kept (best-validated) one
+        r = evaluate(train["final_policy"], env_id, overrides, seeds=range(job["eval_seeds"]))
+        result["final_eval"] = {"successes": r["successes"], "episodes": r["episodes"]}
+    return {**result, "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
 
 
 def _same_job(stamp: Path, job: dict) -> bool:
@@ -336,8 +347,9 @@ def last_decade_rise(res) -> float:
 
 
 def summarize(cfg, results) -> list[dict]:
-    """One row per (cell, agent): pooled success with its seed-clustered interval, the witnessed rate of the same
-    pair seeds, the share, impacts per success, successes without an impact, the last decade's rise."""
+    """One row per (cell, agent): pooled success with its seed-clustered interval, each seed's rate and their
+    minimum, the witnessed rate of the same pair seeds, the shares, impacts per success, successes without an impact,
+    the last decade's rise, and (agents that keep a best-validated snapshot) each seed's final policy."""
     from studies.stats import seed_clustered_ci
     out = []
     for cell in cfg["cells"]:
@@ -350,11 +362,15 @@ def summarize(cfg, results) -> list[dict]:
             lo, hi = seed_clustered_ci(M)
             rate = float(M.mean())
             w = float(wit.mean()) if wit is not None else math.nan
+            per_seed = [float(m.mean()) for m in M]
+            final = [r["final_eval"]["successes"] / r["final_eval"]["episodes"] if "final_eval" in r else math.nan
+                     for r in res]
             out.append({"cell": cell, "agent": agent, "label": a.get("label", agent), "privileged": a["privileged"],
-                        "seeds": len(res), "env_steps": steps, "success": rate, "ci": (lo, hi),
-                        "per_seed": [float(m.mean()) for m in M], "witnessed": w,
+                        "seeds": len(res), "seed_ids": [r["job"]["seed"] for r in res], "env_steps": steps,
+                        "success": rate, "ci": (lo, hi), "per_seed": per_seed, "witnessed": w,
                         "share": rate / w if w and w > 0 else math.nan,
                         "share_ci": (lo / w, min(hi / w, math.inf)) if w and w > 0 else (math.nan, math.nan),
+                        "min_share": min(per_seed) / w if w and w > 0 else math.nan, "final": final,
                         "impacts_per_success": float(np.mean(imps)) if imps else math.nan,
                         "without_impact": sum(1 for k in imps if k == 0), "rise": last_decade_rise(res)})
     return out
@@ -371,58 +387,219 @@ def check_theorems(summary) -> None:
                                                                          for s in bad))
 
 
+# the goals of the agent study: (probe, tables, share of the witnessed rate), for the best agent without privileged
+# information (its minimum over at least MIN_SEEDS seeds) and for the witness-guided agents (every seed)
+UNPRIVILEGED_GOALS = (("Steer", ("stadium", "rounded_rectangle"), 0.9), ("Steer", ("circle", "ellipse"), 0.5),
+                      ("Drive", ("ellipse", "stadium"), 0.9))
+GUIDED_GOAL = 0.9
+MIN_SEEDS = 5
+STABLE = 0.03  # the final policy within this of the kept (best-validated) snapshot, on the pair seeds
+
+
+def verdict(s, goal: float, min_seeds: int = 1) -> tuple[str, str]:
+    """("met" | "not established" | "not met", the evidence) for a summary row against a share of the witnessed
+    rate: met only where every seed (at least min_seeds) and the interval's lower end clear it."""
+    low = s["share_ci"][0]
+    shares = ", ".join(f"{v / s['witnessed']:.2f}" for v in s["per_seed"])
+    words = (f"{s['agent']}: {s['share']:.2f} of the witnessed rate, {s['seeds']} seeds "
+             f"({shares}; minimum {s['min_share']:.2f}), "
+             f"interval {low:.2f} to {min(s['share_ci'][1], 1.0):.2f}")
+    if s["seeds"] >= min_seeds and s["min_share"] >= goal and low >= goal:
+        return "met", words
+    if s["share"] >= goal or s["min_share"] >= goal:
+        return "not established", words + (f"; fewer than {min_seeds} seeds" if s["seeds"] < min_seeds else "")
+    return "not met", words
+
+
 def goals(cfg, summary) -> list[str]:
-    """The issue's goals, checked from the table."""
-    fair_steer = {}
-    for s in summary:
-        if not s["privileged"] and s["cell"][0] == "Steer" and s["cell"][1] != "plane" and s["share"] >= 0.5:
-            fair_steer.setdefault(s["cell"][1], []).append(
-                f"{s['agent']} {s['share']:.2f} of it, {s['seeds']} seeds, interval {s['share_ci'][0]:.2f} to "
-                f"{min(s['share_ci'][1], 1.0):.2f}")
-    single = [c for c in cfg["cells"] if c[0] in ("Steer", "Drive") and c[1] != "plane"]
-    priv = {}
-    for c in single:
-        best = max((s["share"] for s in summary if s["cell"] == c and s["privileged"] and not math.isnan(s["share"])),
-                   default=math.nan)
-        priv[c] = best
+    """The study's goals, checked from the table: a line each, "met" only where the seeds and the interval clear."""
+    lines = []
+    for probe, tables, goal in UNPRIVILEGED_GOALS:
+        for table in tables:
+            for cell in [c for c in cfg["cells"] if c[0] == probe and c[1] == table]:
+                rows = [s for s in summary if s["cell"] == cell and not s["privileged"]]
+                if not rows:
+                    lines.append(f"- {cell_name(cell)}, without privileged information, the minimum over "
+                                 f"{MIN_SEEDS} seeds at {goal} of the witnessed rate: **not run**")
+                    continue
+                best = max(rows, key=lambda s: (s["seeds"] >= MIN_SEEDS, s["min_share"], s["share"]))
+                v, words = verdict(best, goal, MIN_SEEDS)
+                lines.append(f"- {cell_name(cell)}, without privileged information, the minimum over {MIN_SEEDS} "
+                             f"seeds at {goal} of the witnessed rate: **{v}** ({words})")
+    for cell in [c for c in cfg["cells"] if c[0] in ("Steer", "Drive") and c[1] != "plane"]:
+        rows = [s for s in summary if s["cell"] == cell and s["privileged"]]
+        if not rows:
+            lines.append(f"- {cell_name(cell)}, witness-guided (PRIVILEGED) on every seed at {GUIDED_GOAL}: "
+                         "**not run**")
+            continue
+        best = max(rows, key=lambda s: (s["min_share"], s["share"]))
+        v, words = verdict(best, GUIDED_GOAL)
+        lines.append(f"- {cell_name(cell)}, witness-guided (PRIVILEGED) on every seed at {GUIDED_GOAL}: **{v}** "
+                     f"({words})")
     plane = [s for s in summary if s["cell"][1] == "plane"]
-    lines = [f"- an agent without privileged resets reaches at least half the witnessed rate on steer-only park on at "
-             f"least two tables: **{'met' if len(fair_steer) >= 2 else 'not met'}** by the pooled rate "
-             f"({'; '.join(f'{t}: ' + ', '.join(sorted(set(a))) for t, a in sorted(fair_steer.items())) or 'on no table'}"
-             f"; where an interval's lower end is below 0.5, the seeds do not establish it)",
-             f"- the privileged agents reach at least 0.8 of the witnessed rate on every witnessed single-input cell: "
-             f"**{'met' if priv and all(v >= 0.8 for v in priv.values()) else 'not met'}** (best privileged share per "
-             f"cell: {', '.join(f'{cell_name(c)} {v:.2f}' for c, v in priv.items() if not math.isnan(v)) or 'none'}"
-             + (f"; no privileged agent ran on {', '.join(cell_name(c) for c, v in priv.items() if math.isnan(v))}"
-                if any(math.isnan(v) for v in priv.values()) else "") + ")",
-             f"- every agent stays at 0 on the plane: **{'met' if all(s['success'] == 0 for s in plane) else 'NOT met'}** "
-             f"({len(plane)} (agent, cell) rows)"]
+    lines.append(f"- every agent stays at 0 on the plane: **{'met' if all(s['success'] == 0 for s in plane) else 'NOT met'}**"
+                 f" ({len(plane)} (agent, cell) rows, {sum(s['seeds'] for s in plane)} seeds)")
+    kept = [(s, f, k) for s in summary for f, k in zip(s["final"], s["per_seed"]) if not math.isnan(f)]
+    if kept:
+        worst = max(kept, key=lambda x: x[2] - x[1])
+        ok = all(k - f <= STABLE for _, f, k in kept)
+        lines.append(f"- the final policy of every seed within {STABLE} of its kept best-validated snapshot (pair "
+                     f"seeds): **{'met' if ok else 'not met'}** ({len(kept)} seeds; the largest drop "
+                     f"{worst[2] - worst[1]:+.3f}, {worst[0]['agent']} on {cell_name(worst[0]['cell'])})")
     return lines
 
 
 def answer_sentences(cfg, summary) -> list[str]:
-    """One sentence per actuation for the README, from the table."""
+    """The answer to "do baseline agents learn to use impacts?", one sentence per actuation, from the table."""
     out = []
     for probe, words in (("Steer", "steer only, park"), ("Drive", "drive only, reach"), ("Both", "both controls, park")):
-        rows = [s for s in summary if s["cell"][0] == probe and s["cell"][1] != "plane"]
+        rows = [s for s in summary if s["cell"][0] == probe and s["cell"][1] != "plane" and not math.isnan(s["share"])]
         if not rows:
             continue
-        best = {}
-        for s in rows:
-            key = (s["cell"], s["privileged"])
-            if key not in best or s["share"] > best[key]["share"]:
-                best[key] = s
-        fair = [b for (c, p), b in best.items() if not p]
-        priv = [b for (c, p), b in best.items() if p]
+
+        def best_per_cell(privileged):
+            best = {}
+            for s in rows:
+                if s["privileged"] == privileged and (s["cell"] not in best or s["share"] > best[s["cell"]]["share"]):
+                    best[s["cell"]] = s
+            return list(best.values())
 
         def span(bs):
-            v = [b["share"] for b in bs if not math.isnan(b["share"])]
-            if not v:
-                return "-"
-            return f"{v[0]:.2f}" if len(v) == 1 else f"{min(v):.2f} to {max(v):.2f}"
-        out.append(f"**{words}**: the best agent without privileged resets reaches {span(fair)} of the witnessed rate "
-                   f"on the {len(fair)} cell(s) the ladder ran" + (f"; with privileged resets {span(priv)}" if priv else "")
-                   + " (pair seeds of the witness study; [docs/ladder.md](docs/ladder.md)).")
+            if not bs:
+                return None
+            lo, hi = min(b["share"] for b in bs), max(b["share"] for b in bs)
+            mins = min(b["min_share"] for b in bs)
+            return (f"{lo:.2f}" if len(bs) == 1 else f"{lo:.2f} to {hi:.2f}") + \
+                f" of the witnessed rate on {len(bs)} cell(s) (the lowest seed {mins:.2f})"
+        fair, guided = span(best_per_cell(False)), span(best_per_cell(True))
+        impacts = sum(1 for s in rows if s["without_impact"] == 0)
+        text = f"**{words}**: " + (f"agents without privileged information reach {fair}" if fair else
+                                   "no agent without privileged information ran")
+        if guided:
+            text += f"; with the witness guiding their training (PRIVILEGED), {guided}"
+        if probe != "Both":
+            text += f"; every success had an impact ({impacts} of {len(rows)} rows checked)"
+        out.append(text + " ([docs/ladder.md](docs/ladder.md)).")
+    return out
+
+
+FALL_COLUMNS = (("val_success", "validation success"), ("train_success", "training success"), ("std", "noise std"),
+                ("lr", "learning rate"), ("approx_kl", "approximate KL"), ("clip_frac", "clip fraction"),
+                ("explained_variance", "explained variance"), ("grad_norm", "gradient norm"))
+
+
+FALL_TEXT = ("The two recipes of PPO with the heading head on the same cells and seeds, every update's diagnostics "
+             "logged (training/ppo_heading.py's progress.csv). The first recipe anneals the learning rate linearly to "
+             "0 over the budget, lets the heading noise shrink to 0.05 rad and stops an update at a KL of 0.02; the "
+             "second adapts the learning rate to the measured KL (RSL-RL's rule, desired KL 0.01), keeps the noise "
+             "above 0.15 rad, and adds LayerNorm and Adam with beta1 = beta2. The table gives, per seed, the "
+             "validation peak, the lowest and the final validation after it, and the diagnostics at the peak and at "
+             "the end.")
+
+
+def progress_of(runs, job) -> dict | None:
+    """The job's per-update diagnostics (the agent's progress.csv) as {column: array}, or None."""
+    path = job_dir(runs, job) / "progress.csv"
+    if not path.is_file():
+        return None
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return None
+
+    def num(v):
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return math.nan
+    return {c: np.array([num(r.get(c)) for r in rows]) for c in rows[0]}
+
+
+def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
+    """The learning diagnostics of two recipes side by side (config key fall): per seed, the validation peak, what
+    followed it, and the diagnostics at the peak and at the end; a figure of every diagnostic against env steps."""
+    fall = cfg.get("fall")
+    if not fall:
+        return []
+    lines = []
+    cells = [c for c in cfg["cells"] if (fall["before"], c) in results and (fall["after"], c) in results]
+    for cell in cells:
+        runs_of = {}
+        for role in ("before", "after"):
+            for job in jobs:
+                if job["agent"] == fall[role] and tuple(job["cell"]) == cell and result_of(runs, job, job_dir):
+                    p = progress_of(runs, job)
+                    if p is not None:
+                        runs_of.setdefault(role, []).append((job["seed"], p))
+        if len(runs_of) < 2:
+            continue
+        lines += [f"### {cell_name(cell)}: {fall['before']} (before) and {fall['after']} (after)", "",
+                  "| recipe | seed | validation peak (env steps) | after the peak: lowest, final | drop after the peak | "
+                  "learning rate at the peak, end | noise std at the peak, end | KL at the peak, end |",
+                  "|---|---:|---|---|---:|---|---|---|"]
+        for role in ("before", "after"):
+            for seed, p in runs_of[role]:
+                v = p["val_success"]
+                ok = np.flatnonzero(np.isfinite(v))
+                if not len(ok):
+                    continue
+                i = ok[np.argmax(v[ok])]
+                later = ok[ok >= i]
+                low, last = float(np.min(v[later])), float(v[ok[-1]])
+
+                def at(col, j):
+                    return p[col][j] if col in p else math.nan
+                lines.append(f"| {fall[role]} | {seed} | {v[i]:.2f} ({p['global_step'][i]:.3g}) | {low:.2f}, {last:.2f} "
+                             f"| {v[i] - low:+.2f} | {at('lr', i):.1e}, {at('lr', -1):.1e} | {at('std', i):.3f}, "
+                             f"{at('std', -1):.3f} | {at('approx_kl', i):.4f}, {at('approx_kl', -1):.4f} |")
+        png = write_fall_figure(cell, runs_of, fall, out)
+        if png:
+            lines += ["", f"![the diagnostics of {cell_name(cell)}]({png})"]
+        lines.append("")
+    return lines
+
+
+def write_fall_figure(cell, runs_of, fall, out: Path) -> str | None:
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    fig, axes = plt.subplots(2, 4, figsize=(13, 5.5), sharex=True)
+    for ax, (col, title) in zip(axes.ravel(), FALL_COLUMNS):
+        for role, color in (("before", "C3"), ("after", "C0")):
+            for k, (seed, p) in enumerate(runs_of.get(role, [])):
+                if col not in p:
+                    continue
+                x, y = p["global_step"], p[col]
+                ok = np.isfinite(y)
+                ax.plot(x[ok], y[ok], color=color, lw=0.8, alpha=0.8, marker="." if col == "val_success" else None,
+                        ms=3, label=f"{fall[role]}" if k == 0 else None)
+        ax.set_title(title, fontsize=9)
+        if col in ("lr", "approx_kl", "grad_norm"):
+            ax.set_yscale("log")
+    axes[0, 0].legend(fontsize=7)
+    for ax in axes[1]:
+        ax.set_xlabel("env steps")
+    fig.suptitle(f"{cell_name(cell)}: every update's diagnostics, each seed a line", fontsize=10)
+    fig.tight_layout()
+    png = out.with_name(f"{out.stem}_fall_{cell_name(cell)}.png")
+    fig.savefig(png, dpi=90)
+    plt.close(fig)
+    return png.name
+
+
+def archive_rows(cells, path=DOCS / "ladder_archive.csv") -> dict:
+    """{cell: [rows]} of earlier studies' agents, kept with their date and commit (not rerun): docs/ladder_archive.csv."""
+    if not Path(path).is_file():
+        return {}
+    out = {}
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            cell = (r["probe"], r["table"], r["law"] if r["table"] != "plane" else "-")
+            if cell in cells:
+                out.setdefault(cell, []).append(r)
     return out
 
 
@@ -430,6 +607,7 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
     from studies.common import header
     results, stale = load_results(cfg, jobs, runs)
     summary = summarize(cfg, results)
+    archived = archive_rows(cfg["cells"])
     check_theorems(summary)
     rows = csv_rows(cfg, results)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -450,29 +628,46 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
               "- privileged agents (PRIVILEGED below) reset their training envs to chosen states and learn from certified "
               f"witness episodes of training seeds {DEMO_SEED}+ (never the pair seeds); the others see only what the env "
               "gives any agent", ""]
+    lines += ["## The answer", "", "Do baseline agents learn to use impacts? Per actuation (the README's block):", "",
+              *answer_sentences(cfg, summary), ""]
     lines += ["## Goals", "", *goals(cfg, summary), ""]
     lines += ["## Per cell", "",
-              "Success at the agent's budget, pooled over its seeds, with a 95 % interval clustered by seed (honest at 0 "
-              "and 1); the witnessed rate of the same pair seeds (docs/witnesses_pairs.csv); the share; impacts per "
-              "successful episode (up to its success) and how many successes had none (the theorems say single-input "
-              "successes need one); the rise of the mean success over the last decade of samples (flat: below 0.02).",
-              ""]
+              "Success at the agent's budget (the policy it hands out: with early stopping, its best-validated "
+              "snapshot), pooled over its seeds, with a 95 % interval clustered by seed (honest at 0 and 1), each seed's "
+              "rate and the lowest seed's share of the witnessed rate; the final policy per seed (the last update's, "
+              "without early stopping; '-' where the agent keeps none); the witnessed rate of the same pair seeds "
+              "(docs/witnesses_pairs.csv); the share with its interval; impacts per successful episode (up to its "
+              "success) and how many successes had none (the theorems say single-input successes need one); the rise "
+              "of the mean success over the last decade of samples (flat: below 0.02). Rows marked 'not rerun' are "
+              "earlier studies' agents at their date and commit (docs/ladder_archive.csv).", ""]
     for cell in cfg["cells"]:
         srows = [s for s in summary if s["cell"] == cell]
         if not srows:
             continue
         lines += [f"### {cell_name(cell)} ({PROBE_TASKS[cell[0]]}, {cell[1]}, law {cell[2]})", "",
-                  "| agent | privileged | seeds | env steps | success [95 % CI] | per seed | witnessed | share | "
-                  "impacts per success | successes without impact | rise over the last decade |",
-                  "|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|"]
+                  "| agent | privileged | seeds | env steps | success [95 % CI] | per seed | lowest seed's share | "
+                  "final policy per seed | witnessed | share [95 % CI] | impacts per success | successes without "
+                  "impact | rise over the last decade |",
+                  "|---|---|---:|---:|---|---|---:|---|---:|---|---:|---:|---:|"]
         for s in srows:
+            final = ", ".join("-" if math.isnan(v) else f"{v:.2f}" for v in s["final"])
             lines.append(f"| {s['label']} | {'PRIVILEGED' if s['privileged'] else 'no'} | {s['seeds']} | "
                          f"{s['env_steps']:.3g} | {s['success']:.3f} [{s['ci'][0]:.3f}, {s['ci'][1]:.3f}] | "
-                         f"{', '.join(f'{v:.2f}' for v in s['per_seed'])} | {_f(s['witnessed'])} | {_f(s['share'])} | "
-                         f"{_f(s['impacts_per_success'], 1)} | {s['without_impact']} | {_rise(s['rise'])} |")
+                         f"{', '.join(f'{v:.2f}' for v in s['per_seed'])} | {_f(s['min_share'])} | {final} | "
+                         f"{_f(s['witnessed'])} | {_f(s['share'])} [{_f(s['share_ci'][0])}, "
+                         f"{_f(min(s['share_ci'][1], 1.0))}] | {_f(s['impacts_per_success'], 1)} | "
+                         f"{s['without_impact']} | {_rise(s['rise'])} |")
+        for r in archived.get(cell, []):
+            n, k = int(r["episodes"]), int(r["successes"])
+            lines.append(f"| {r['label']} ({r['source']}, {r['date']}, {r['commit']}; not rerun) | "
+                         f"{'PRIVILEGED' if r['privileged'] in ('True', 'true', '1') else 'no'} | {r['seeds']} | - | "
+                         f"{k / n:.3f} ({k}/{n}) | - | - | - | {r['witnessed_rate'] or '-'} | - | - | - | - |")
         if cell_name(cell) in figures:
             lines += ["", f"![{cell_name(cell)}]({figures[cell_name(cell)]})"]
         lines.append("")
+    fall = fall_section(cfg, jobs, runs, results, out)
+    if fall:
+        lines += ["## What made PPO fall, and what holds it", "", FALL_TEXT, "", *fall]
     lines += ["CSV: one row per (agent, privileged, probe, table, law, seed, env_steps): "
               f"[{out.with_suffix('.csv').name}]({out.with_suffix('.csv').name}).", ""]
     out.write_text("\n".join(lines))

@@ -447,6 +447,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
         log(f"[ppo_heading] {global_step:,} steps in {wall:.0f} s ({global_step / max(wall, 1e-9):,.0f} steps/s; env "
             f"{t_env:.0f} s, update {t_upd:.0f} s), train success {train_success:.3f}")
     results["policy"] = policy()
+    results["final_policy"] = HeadingPolicy(agent, k)  # (the last update's, without early stopping)
     return results
 
 

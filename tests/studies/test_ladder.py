@@ -80,6 +80,26 @@ def test_the_summary_is_honest_at_zero_and_flags_impact_free_single_input_succes
         ladder.check_theorems(ladder.summarize(cfg, results))
 
 
+def test_a_goal_is_met_only_where_every_seed_and_the_interval_clear_it():
+    cell = ("Steer", "stadium", "elastic")
+    cfg = {"eval_seeds": 200, "cells": [cell], "agents": {"a": {"privileged": False}}}
+
+    def row(rates):
+        res = [_result("a", cell, k, [1] * int(200 * r) + [-1] * (200 - int(200 * r))) for k, r in enumerate(rates)]
+        return ladder.summarize(cfg, {("a", cell): res})[0]
+    assert ladder.verdict(row([0.97, 0.95, 0.99, 0.96, 0.98]), 0.9, 5)[0] == "met"
+    v, words = ladder.verdict(row([0.97, 0.95, 0.99, 0.96, 0.5]), 0.9, 5)  # one seed below: its minimum
+    assert v == "not met" or v == "not established"
+    assert "minimum 0.50" in words
+    assert ladder.verdict(row([0.97, 0.95, 0.99]), 0.9, 5)[0] == "not established"  # too few seeds
+    # the pooled rate clears it but the spread of the seeds leaves the interval's lower end below: not established
+    v, words = ladder.verdict(row([1.0, 1.0, 1.0, 1.0, 0.6]), 0.9, 1)
+    assert v == "not established" and "interval" in words
+    lines = ladder.goals(cfg, [row([0.97, 0.95, 0.99, 0.96, 0.98])])
+    assert any("Steer-stadium-elastic, without privileged information" in g and "**met**" in g for g in lines)
+    assert any("Steer-stadium-elastic, witness-guided" in g and "**not run**" in g for g in lines)
+
+
 def test_the_witnessed_rate_comes_from_the_witness_studys_pairs():
     w = ladder.witnessed_by_seed(("Steer", "ellipse", "elastic"), 200)
     with open(ROOT / "docs" / "witnesses.csv") as f:
@@ -141,4 +161,4 @@ def test_an_agent_may_have_its_own_seeds_and_cells(tmp_path):
     path = tmp_path / "c.yaml"
     path.write_text(yaml.safe_dump(cfg))
     jobs = ladder.make_jobs(ladder.load_config(path))
-    assert [(j["cell"], j["seed"]) for j in jobs] == [(["Steer", "plane", "-"], 3)]
+    assert [(j["cell"], j["seed"]) for j in jobs if j["agent"] == "ppo"] == [(["Steer", "plane", "-"], 3)]
