@@ -127,6 +127,7 @@ def load_config(path) -> dict:
         bad = sorted(set(a.get("args") or {}) - names)
         if bad:
             raise ValueError(f"{path}: agents.{name}.args: {bad} are not fields of {a['module']}.Args")
+        check_agent_args(module, dict(a.get("args") or {}), f"{path}: agents.{name}.args")
     fall = cfg.get("fall")
     if fall is not None and not (isinstance(fall, dict) and set(fall) == {"before", "after"}
                                  and all(v in cfg["agents"] for v in fall.values())):
@@ -135,6 +136,24 @@ def load_config(path) -> dict:
     if not isinstance(d, dict) or set(d) != {"pairs"} or isinstance(d["pairs"], bool) or not isinstance(d["pairs"], int):
         raise ValueError(f"{path}: demos must be {{pairs: N}} (witness episodes per cell for the privileged agents)")
     return cfg
+
+
+def check_agent_args(module, args: dict, where: str) -> None:
+    """The agent's own checks of its Args (training/agent_cli.py's, or the agent's check_args) on the config's values,
+    before any job runs; ValueError naming the place and the field."""
+    from training.agent_cli import check_args
+    make = getattr(module, "ladder_args", module.Args)
+    probe = {"demos": "demos.npz"} if "demos" in {f.name for f in dataclasses.fields(module.Args)} else {}
+    if args.get("device") == "cuda":  # (a GPU config is checked on any machine; its device when its jobs run)
+        args = {**args, "device": "cpu"}
+    try:
+        built = make(**{**probe, **args})
+        if hasattr(module, "CHECKS"):
+            check_args(built, module.CHECKS)
+        elif hasattr(module, "check_args"):
+            module.check_args(built)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def _seeds_words(cfg) -> str:

@@ -156,6 +156,8 @@ class Agent(nn.Module):
         self.n_act = self.steer + self.drive
         self.critic = mlp(A.FEATURES_DIM, 1, hidden, 1.0, layer_norm)
         self.actor = mlp(A.FEATURES_DIM, 2 * self.steer + self.drive, hidden, 0.01, layer_norm)
+        if self.steer:  # the heading 2-vector starts of length ~1: its angle's sensitivity to the weights ~ 1 / length
+            nn.init.orthogonal_(self.actor[-1].weight[:2], 1.0)
         self.log_std = nn.Parameter(torch.full((1, self.n_act), math.log(std_init)))
         self.log_std_range = (math.log(std_min), math.log(std_max))
 

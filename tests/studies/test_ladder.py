@@ -46,6 +46,12 @@ def _config(tmp_path, **changes):
                          "budget": {"Steer": 10}, "seeds": [0, 0]}}}, "agents.ppo.seeds"),
     ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Steer"],
                          "budget": {"Steer": 10}, "cells": [["Steer", "circle", "elastic"]]}}}, "agents.ppo.cells"),
+    ({"agents": {"h": {"module": "training.ppo_heading", "privileged": False, "probes": ["Steer"],
+                       "budget": {"Steer": 10}, "args": {"gamma": 1.5}}}}, r"agents.h.args: gamma must be in \[0, 1\]"),
+    ({"agents": {"h": {"module": "training.ppo_heading", "privileged": False, "probes": ["Steer"],
+                       "budget": {"Steer": 10}, "args": {"lr_schedule": "cosine"}}}}, "lr_schedule must be one of"),
+    ({"agents": {"ppo": {"module": "training.ppo_torch", "privileged": False, "probes": ["Steer"],
+                         "budget": {"Steer": 10}, "args": {"num_envs": 0}}}}, "num_envs must be a positive integer"),
 ])
 
 def test_a_bad_config_is_refused_naming_the_field(tmp_path, changes, message):
