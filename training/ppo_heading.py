@@ -98,6 +98,7 @@ class Args:
     std_min: float = 0.15  # noise floor and ceiling (the log-std is clamped)
     std_max: float = 2.0
     norm_coef: float = 0.1  # pulls the heading 2-vector's length to 1 (its angle's gradient stays bounded)
+    heading_init: float = 0.01  # the heading 2-vector's output weights' scale at the start (guided runs: 1, below)
     v_flat: float = 0.5  # park potential: speeds under this x speed_tolerance count as 0
     desync: bool = True
     val_every: int = 5_000_000  # env steps between validation evaluations (0: none)
@@ -118,7 +119,8 @@ CHECKS = {"num_envs": positive, "num_steps": positive, "minibatch_size": positiv
           "lr_min": positive, "lr_max": positive, "gamma": unit_interval, "gae_lambda": unit_interval,
           "clip_coef": positive, "target_kl": non_negative, "vf_coef": non_negative, "ent_coef": non_negative,
           "max_grad_norm": positive, "reward_scale": positive, "hidden": positive, "std_init": positive,
-          "std_min": positive, "std_max": positive, "norm_coef": non_negative, "v_flat": non_negative,
+          "std_min": positive, "std_max": positive, "norm_coef": non_negative, "heading_init": positive,
+          "v_flat": non_negative,
           "val_every": non_negative, "val_episodes": positive, "save_every": positive,
           "guide": one_of("none", "jsrl", "curriculum"), "guide_step": unit_interval,
           "guide_threshold": unit_interval, "guide_min_episodes": positive, "guide_p_own": unit_interval,
@@ -150,14 +152,16 @@ class Agent(nn.Module):
     scores) is [heading angle psi] + [a], one noise std per action. Critic: features -> value."""
 
     def __init__(self, k: A.TaskConsts, hidden: int, std_init: float, std_min: float, std_max: float,
-                 layer_norm: bool):
+                 layer_norm: bool, heading_init: float = 0.01):
         super().__init__()
         self.steer, self.drive = bool(k.gain1), bool(k.gain2)
         self.n_act = self.steer + self.drive
         self.critic = mlp(A.FEATURES_DIM, 1, hidden, 1.0, layer_norm)
         self.actor = mlp(A.FEATURES_DIM, 2 * self.steer + self.drive, hidden, 0.01, layer_norm)
-        if self.steer:  # the heading 2-vector starts of length ~1: its angle's sensitivity to the weights ~ 1 / length
-            nn.init.orthogonal_(self.actor[-1].weight[:2], 1.0)
+        # the heading 2-vector's scale at the start (its angle's sensitivity to the weights ~ 1 / length); 0.01 is the
+        # output layer's own initialisation
+        if self.steer and heading_init != 0.01:
+            nn.init.orthogonal_(self.actor[-1].weight[:2], heading_init)
         self.log_std = nn.Parameter(torch.full((1, self.n_act), math.log(std_init)))
         self.log_std_range = (math.log(std_min), math.log(std_max))
 
@@ -239,7 +243,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
     N, T = args.num_envs, args.num_steps
     env = A.make_vec(args.env_id, N, training_kwargs(args))
     k = A.TaskConsts.of(env)
-    agent = Agent(k, args.hidden, args.std_init, args.std_min, args.std_max, args.layer_norm)
+    agent = Agent(k, args.hidden, args.std_init, args.std_min, args.std_max, args.layer_norm, args.heading_init)
     opt = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, betas=tuple(args.adam_betas))
     guide = None
     if args.guide != "none":
