@@ -90,8 +90,10 @@ class Guide:
 
     def summary(self) -> dict:
         D = max(len(self.T), 1)
+        n = int(self.tries.sum())
         return {"guide_frac": float(np.mean(np.where(self.done, 0.0, self.frac))) if len(self.T) else 0.0,
-                "guide_done": float(self.done.sum() / D), "guide_dropped": float(self.dropped.sum() / D)}
+                "guide_done": float(self.done.sum() / D), "guide_dropped": float(self.dropped.sum() / D),
+                "guide_success": float(self.wins.sum() / n) if n else float("nan")}
 
     # -- per step ---------------------------------------------------------------------------------------------------
     def start(self, rows: np.ndarray):

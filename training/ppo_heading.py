@@ -225,7 +225,8 @@ def explained_variance(pred: torch.Tensor, target: torch.Tensor) -> float:
 
 
 PROGRESS = ["global_step", "wall_s", "train_success", "val_success", "steps_per_s", "std", "approx_kl", "clip_frac",
-            "value_loss", "explained_variance", "grad_norm", "lr", "minibatches", "guide_frac", "guide_done"]
+            "value_loss", "explained_variance", "grad_norm", "lr", "minibatches", "guide_frac", "guide_done",
+            "guide_success"]
 
 
 def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None) -> dict:
