@@ -111,9 +111,13 @@ def heading_for(direction, theta_dot) -> float:
     return a if theta_dot >= 0 else a + math.pi
 
 
+SPIN_ROUND_OFF = 1e-12  # [rad/s] a spin this small is the simulator's round-off (a release leaves ~1e-15): not braked
+
+
 def brake_rows(phi_dot, a1, dt) -> list:
-    """Scaled steering torques (phi'' = action a1) that bring phi_dot to 0 in the fewest rows, at a constant torque."""
-    if phi_dot == 0:
+    """Scaled steering torques (phi'' = action a1) that bring phi_dot to 0 in the fewest rows, at a constant torque
+    (none for a spin at round-off level, so that a turn that follows starts at once)."""
+    if abs(phi_dot) <= SPIN_ROUND_OFF:
         return []
     n = max(1, int(math.ceil(abs(phi_dot) / (a1 * dt) - 1e-12)))
     return [-phi_dot / (a1 * dt * n)] * n
@@ -262,6 +266,7 @@ class ParkRecord:
     stops: list = field(default_factory=list)     # T8.2: (theta_dot before, theta_dot after, phi_dot after, s at stop)
     releases: list = field(default_factory=list)  # T8.2: (predicted |theta_dot|, |theta_dot| after, turned, final)
     impacts_at: list = field(default_factory=list)  # (s, y) of the contact point after each impact row
+    crossings: list = field(default_factory=list)   # T8.2: s of the contact point at the row after each mid-line crossing
     aim_turn: float = math.nan                    # T6.1's turn delta (rad)
 
 
@@ -356,8 +361,8 @@ class ZigzagConstants:
 def zigzag_constants(table, pair: FlatPair, params, a1, v_max, dt=0.0) -> ZigzagConstants:
     """T8.2's invariant: a mid-line crossing at |s0| <= xi, re-aimed toward s = 0, stops at |s| <= max(D, xi - D + d1)
     <= X - R and crosses the mid-line next at |s| <= max(2 D, xi - 2 D + d1) <= xi. xi is the smaller of X - R + D - d1
-    (the stops stay on the flat pieces with the spin circle in the rectangle) and the largest |s| at which the re-aim
-    turn (lasting T_turn, starting within v_max dt of the mid-line) has room."""
+    (the stops stay on the flat pieces with the spin circle in the rectangle) and the largest |s| of a mid-line crossing
+    after which the re-aim turn (lasting T_turn, starting within v_max dt of the crossing) has room."""
     beta = full_conversion_angle(params)
     R = params.R
     L = pair.b - R * math.cos(beta)
@@ -366,8 +371,10 @@ def zigzag_constants(table, pair: FlatPair, params, a1, v_max, dt=0.0) -> Zigzag
     d1 = v_max * (t_turn * math.tan(beta) + 2.0 * dt * math.sin(beta))
     need = R + v_max * t_turn + ROOM_MARGIN
 
-    def room(s):  # clearance is concave: its least over the box |s'| <= s, |y| <= v_max dt is at a corner
-        return min(clearance(table, pair.vector(sg * s, sy * v_max * dt)) for sg in (1, -1) for sy in (1, -1)) > need
+    def room(s):  # the turn starts in the box |s'| <= s + v_max dt, |y| <= v_max dt (the lag after the crossing);
+        # clearance is concave, so its least over the box is at a corner
+        lag = v_max * dt
+        return min(clearance(table, pair.vector(sg * (s + lag), sy * lag)) for sg in (1, -1) for sy in (1, -1)) > need
     lo, hi = 0.0, pair.X + pair.b
     if not room(lo):
         xi_room = -math.inf
@@ -461,6 +468,7 @@ def stop_release_park(ep: Episode, st: Steering, pair: FlatPair, target, choice,
             rec.phase = "cross"
             ep.coast_until(_crossed_mid_line(ep, pair, side))
             s_mid = pair.coords(ep.state()[:2])[0]
+            rec.crossings.append(s_mid)
             aim(-1.0 if s_mid > 0 else 1.0, -side)
         _park_from_mid_line(ep, st, pair, target, rec, v_slow)
     except EpisodeEnded:

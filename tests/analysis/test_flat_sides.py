@@ -192,7 +192,7 @@ def test_t8_1_fails_when_the_room_is_too_generous():
 
 
 # -- T8.2: elastic walls ------------------------------------------------------------------------------------------
-def _zigzag_checks(rec, pair, beta=None):
+def _zigzag_checks(rec, table, pair):
     """The proof's formulas on the record of stop_release_park: each stop leaves theta_dot = 0 and
     |phi_dot| = sqrt((I + m R^2) / J) |theta_dot-|; each release comes after the heading turned pi - 2 beta* and
     turns the spin into |theta_dot| = sqrt(J / (I + m R^2)) |phi_dot| (the last one: the chosen slow speed); every
@@ -209,6 +209,8 @@ def _zigzag_checks(rec, pair, beta=None):
         if not final:
             assert abs(turned - free) <= 1e-9, turned
     assert rec.releases[-1][3], "the last release is the slow one"
+    c = fs.zigzag_constants(table, pair, P, 6.25e-7 / P.J, 0.05, 0.05)
+    assert all(abs(s) <= c.xi + 0.05 * 0.05 for s in rec.crossings)  # the invariant: crossings within xi (+ a row)
 
 
 @pytest.mark.parametrize("table", ["stadium", "rounded_rectangle"])
@@ -223,7 +225,7 @@ def test_t8_2_stop_and_release_parks_in_the_probe_env(table):
         env.reset(options={"state": s, "target": g})
         rec = fs.stop_release_park(_episode(env), st, pair, g, choice)
         assert rec.success, (seed, rec.phase)
-        _zigzag_checks(rec, pair)
+        _zigzag_checks(rec, st.table, pair)
         phases.append(rec.phase)
     env.close()
     assert "park" in phases
@@ -243,7 +245,7 @@ def test_t8_2_fails_with_a_wrong_formula(mutation):
     rec = fs.stop_release_park(_episode(env), st, pair, g, choice, **kw)
     env.close()
     with pytest.raises(AssertionError):
-        _zigzag_checks(rec, pair)
+        _zigzag_checks(rec, st.table, pair)
 
 
 def test_t8_2_table_constants_in_interval_arithmetic():
@@ -282,10 +284,11 @@ def test_t8_2_table_constants_in_interval_arithmetic():
                 continue
             for m in margins:
                 assert m.a > 0, (table, pair, m)
-            # the re-aim at the largest mid-line crossing has room: clearance at the box's corners > R + v k dt
+            # the re-aim after the largest mid-line crossing has room: clearance at the corners of the box where it
+            # starts (|s| <= xi + v dt, |y| <= v dt) > R + v k dt
             for cs in (1, -1):
                 for cy in (1, -1):
-                    corner = pair.vector(cs * c.xi, cy * 0.05 * 0.05)
+                    corner = pair.vector(cs * (c.xi + 0.05 * 0.05), cy * 0.05 * 0.05)
                     assert iv.mpf(fs.clearance(table, corner)).a - 1e-15 > (R + v * k * dt).b
     # the stadium's sides and the rounded rectangle's long sides; its short sides (X = 0.06 m) are too short for the
     # zigzag across the long way (2 D = 0.115 m)
