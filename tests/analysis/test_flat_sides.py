@@ -318,3 +318,32 @@ def test_t8_decides_the_probe_pairs():
         env.reset(seed=0)
         assert fs.steer_park_theorem(st.table, law, st.params, st.a1, st.dt, u.state, u.target) is None
         env.close()
+
+
+def test_t8_numbers_on_the_theory_page():
+    """The numbers docs/controllability_theory.md quotes for T8 and for T7.4's worked example are the formulas' values
+    (penny_env.analysis.flat_sides and one_input), formatted as the page writes them."""
+    import pathlib
+
+    page = " ".join((pathlib.Path(__file__).resolve().parents[2] / "docs" / "controllability_theory.md").read_text()
+                    .split())
+    a1 = 6.25e-7 / P.J
+    beta = ig.full_conversion_angle(P)
+    st, rr = Stadium(0.1, 0.15), RoundedRectangle(0.3, 0.2, 0.04)
+    cs = fs.zigzag_constants(st, fs.flat_pairs(st)[0], P, a1, 0.05, 0.05)
+    cl, cshort = (fs.zigzag_constants(rr, pair, P, a1, 0.05, 0.05) for pair in fs.flat_pairs(rr))
+    want = [f"beta* = {math.degrees(beta):.1f} deg", f"Delta_flat = {cs.free_angle:.3f} rad",
+            f"{cs.D:.4f} m for `b = 0.1 m`", f"({2 * math.sqrt(2 * beta / a1):.2f} s; 12 rows",
+            f"`d1 = {cs.d1:.4f} m`", f"`xi = {cs.xi:.4f} m` and the margins of the table condition "
+            + ", ".join(f"{m:.4f}" for m in cs.margins) + " m",
+            f"`xi = {cl.xi:.4f} m`, margins " + ", ".join(f"{m:.4f}" for m in cl.margins) + " m",
+            f"`X - R - D = {cshort.margins[0]:.4f} m`", f"`2 D = {2 * cshort.D:.3f} m`",
+            f"`tau = 2 sqrt(2 pi / a1)` ({fs.aim_time(a1):.2f} s", f"rows of 0.05 s, {fs.aim_time(a1, dt=0.05):.1f} s"]
+    tau0 = oi.circle_aim_time(0.5, a1, math.pi / 2)
+    ok, (clear, _, _) = oi.circle_stop_room(0.25, (0.1, -0.12), 0.04, tau0, P.R, beta)
+    z = math.hypot(0.1, -0.12)
+    want += [f"`d* = {oi.stop_chord_distance(0.25, beta):.4f} m`", f"`rho = {0.04 * tau0:.3f} m < d* < |z0| - rho = "
+             f"{z - 0.04 * tau0:.3f} m`", f"clearance {clear + P.R:.3f} m > R",
+             f"`tau0 = {oi.circle_aim_time(0.5, a1, math.pi):.2f} s`"]
+    missing = [w for w in want if w not in page]
+    assert ok and not missing, missing
