@@ -347,3 +347,16 @@ def test_t8_numbers_on_the_theory_page():
              f"`tau0 = {oi.circle_aim_time(0.5, a1, math.pi):.2f} s`"]
     missing = [w for w in want if w not in page]
     assert ok and not missing, missing
+
+
+def test_the_readme_says_what_the_theory_page_says():
+    """The README's sentence on one input (T7, T8) is the theory page's, word for word."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[2]
+
+    def sentence(text):
+        flat = " ".join(text.split())
+        return re.search(r"a drive-only penny at rest on any convex table.*?the step that fails named there\.", flat).group(0)
+    assert sentence((root / "README.md").read_text()) == sentence((root / "docs" / "controllability_theory.md").read_text())
