@@ -95,6 +95,7 @@ REPORTS = {
     "docs/witnesses.md": ("python -m studies.witness_study --workers 2",
                           ("studies/witness.py", "studies/witness_study.py", "studies/verdict.py",
                            "training/policies.py", "penny_env/analysis/controllability_theorems.py",
+                           "penny_env/analysis/flat_sides.py", "penny_env/analysis/one_input.py",
                            "penny_env/envs/vector_env.py", "penny_env/envs/penny_env.py") + _ENV + _PHYSICS + _TABLES),
     "docs/fair_rl.md": ("python -m studies.fair_rl --out docs/fair_rl.md",
                         ("studies/fair_rl.py", "studies/witness.py", "studies/witness_study.py") + _ENV + _PHYSICS
