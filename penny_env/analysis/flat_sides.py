@@ -276,9 +276,9 @@ def _crossed_mid_line(ep, pair, side):
 
 
 def _park_from_mid_line(ep, st, pair, target, rec, v_slow):
-    """The common end of T8.1 and T8.2: a penny creeping at |R theta_dot| < v_slow with phi_dot braked, moving toward
-    the side -side, crosses the mid-line; away from the target by more than T6.1's disk; then T6.1's turn and the
-    creep through the target."""
+    """The common end of T8.1 and T8.2, for a penny creeping at |R theta_dot| <= v_slow just after an impact (or a
+    release) on one side: brake its spin, coast across the mid-line (the clearance there is large) and on until the
+    target lies outside T6.1's disk, then T6.1's turn and the creep through the target."""
     rec.phase = "creep"
     ep.rows(brake_rows(ep.state()[5], st.a1, st.dt))
     side = math.copysign(1.0, pair.coords(ep.state()[:2])[1])  # (just after an impact on that side)
