@@ -19,6 +19,7 @@ def test_a_copy_starts_at_the_same_place_with_the_same_energy_turned_by_the_angl
     assert psi[1] - psi[0] == pytest.approx(1e-3, abs=1e-15)
 
 
+@pytest.mark.slow  # (the batched boundary map's first use in a process compiles it: about 30 s on 2 busy cores)
 def test_quick_run_writes_outside_docs(tmp_path):
     out, rows = ls.main(["--quick", "--out", str(tmp_path / "spread.md")])
     text = out.read_text()
