@@ -94,6 +94,18 @@ def _g_upper(x, cmax, cmin):
     return np.where(x >= 0, _up(x * cmax), _up(x * cmin))
 
 
+def cell_enclosures(w0, h, N):
+    """(lo, hi), arrays (2 N,): float64 bounds, outward, of the theta_dot cells [w0 + i h, w0 + (i + 1) h],
+    i = -N .. N - 1. The edges w0 + i h are two roundings off in float64; the margin is far above those. The
+    programme takes every theta_dot in a cell to be anywhere in [lo, hi]: a bound only if the cell lies inside it (a
+    cell's midpoint in its place would miss the plans that run along the cells' edges, such as full torque)."""
+    idx = np.arange(-N, N + 1, dtype=float)
+    edge = w0 + idx * h
+    margin = 1e-12 + 1e-15 * (abs(w0) + N * h)   # >> the two roundings (each <= 1.2e-16 of |w0| + N h)
+    e_lo, e_hi = _down(edge - margin), _up(edge + margin)
+    return e_lo[:-1], e_hi[1:]
+
+
 def displacement_upper(w0, phi0, w, psi, R, a1, a2, dt, K, wf, h_steps=CELLS_PER_ROW_STEP, m=PARTS):
     """A float64 upper bound (rounded outward throughout) of R int_0^{K dt} G_t(theta_dot) dt over every rolling plan of
     K rows from theta_dot(0) = w0 with |theta_dot(K dt)| <= wf (wf = inf: no end condition); see the module docstring."""
@@ -102,11 +114,7 @@ def displacement_upper(w0, phi0, w, psi, R, a1, a2, dt, K, wf, h_steps=CELLS_PER
     h = _up(A / h_steps)                      # h_steps * h >= A: a row moves at most h_steps cells
     n = h_steps
     N = K * n                                 # cells -N .. N-1: cell i = [w0 + i h, w0 + (i + 1) h]
-    idx = np.arange(-N, N + 1, dtype=float)
-    edge = w0 + idx * h                       # the edges w0 + i h, two roundings off: enclosed with a margin
-    margin = 1e-12 + 1e-15 * (abs(w0) + N * h)   # >> the two roundings (each <= 1.2e-16 of |w0| + N h)
-    e_lo, e_hi = _down(edge - margin), _up(edge + margin)
-    lo, hi = e_lo[:-1], e_hi[1:]              # cell enclosures
+    lo, hi = cell_enclosures(w0, h, N)
     coef_up = _up(_up(R * dt) / m)
     coef_lo = _down(_down(R * dt) / m)
     wf_up = math.inf if math.isinf(wf) else float(_up(wf * (1 + 1e-12)))  # (the set's float R * theta_dot test)

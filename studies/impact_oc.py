@@ -4,6 +4,7 @@ impact sequences seeded from the certified witnesses.
 
     python -m studies.impact_oc [--quick] [--pairs 10] [--seed 0] [--workers 1] [--out docs/optimal_control.md]
                                  [--runs runs/impact_oc] [--report-only]
+    python -m studies.impact_oc --recertify  # replay docs/optimal_control_certificates.json with the margin rule
 
 The problems are those of studies/optimal_control.py (the same ``Problem``, shooting, SLSQP with exact
 derivatives through impacts, and the same verification by simulating the torques again), on a new
@@ -399,12 +400,28 @@ def lower_bound(row):
     return _BOUNDS[key]
 
 
+REPLAY_MARGIN = 1e-9  # [m, m/s] a replay counts only if it ends this far inside the env's success set
+
+
+def end_margin(env) -> float:
+    """How far inside its task's success set an env's state is: tolerance - d, and for park also speed_tolerance -
+    |R theta_dot| (the smaller). Computed in float64 from the state, whose rounding (about 1e-17 m) is far below
+    REPLAY_MARGIN: a positive margin above it is a success that no rounding of the end can undo."""
+    u = env.unwrapped
+    s, task = u.state, u.task
+    m = task.tolerance - math.hypot(s[0] - u.target[0], s[1] - u.target[1])
+    if task.kind == "park":
+        m = min(m, task.speed_tolerance - abs(u.scene.make_params().R * s[4]))
+    return float(m)
+
+
 def env_replay(row, v=None):
-    """(is_success, steps, impacts): the plan with impacts (scaled torques v, default the row's) replayed as an episode
-    of the probe's environment reset with the pair's start and target, success as in the optimal-control problem
-    (park: position and rolling speed; the probe's spin tolerance, which the problem does not pose, is switched off).
-    The env's success is strict (d < tolerance) where the problem allows 1e-6 of slack, so an episode misses a
-    minimum-time plan that ends on the edge of the set: :func:`env_certified_plan` moves it inside."""
+    """(is_success, steps, impacts, margin): the plan with impacts (scaled torques v, default the row's) replayed as an
+    episode of the probe's environment reset with the pair's start and target, success as in the optimal-control
+    problem (park: position and rolling speed; the probe's spin tolerance, which the problem does not pose, is switched
+    off), and :func:`end_margin` at its last step. The env's success is strict (d < tolerance) where the problem allows
+    1e-6 of slack, so an episode misses, or meets by a rounding, a minimum-time plan that ends on the edge of the set:
+    :func:`env_certified_plan` moves it inside."""
     import gymnasium as gym
 
     kw = {"spin_tolerance": None} if TASK[row["actuation"]] == "park" else {}
@@ -419,8 +436,8 @@ def env_replay(row, v=None):
             _, _, term, trunc, info = env.step(np.asarray(act, np.float64))
             n_imp += int(info["impacts"])
             if term or trunc:
-                return bool(info["is_success"]), i, n_imp
-        return False, len(v), n_imp
+                return bool(info["is_success"]), i, n_imp, end_margin(env)
+        return False, len(v), n_imp, end_margin(env)
     finally:
         env.close()
 
@@ -430,31 +447,71 @@ _ENV_PLANS: dict = {}
 
 
 def env_certified_plan(row):
-    """(scaled torques, is_success, steps, impacts, how): the certified row's plan with impacts as an episode of the
-    probe's environment. A minimum-time plan ends on the edge of the set, which the env's strict test can miss; then
-    the package's optimizer (solve_rows, SLSQP) re-solves the same rows from it into the set shrunk by INSIDE, and that
-    plan, verified again by simulation, hitting the wall, is replayed. Computed once per row."""
-    from studies.optimal_control import solve_rows
-
+    """(scaled torques, is_success, steps, impacts, how, margin): the certified row's plan with impacts as an episode of
+    the probe's environment. Computed once per row by :func:`inside_plan`."""
     key = (row["scene"], row["actuation"], np.asarray(row["start"], float).tobytes(),
            np.asarray(row["target"], float).tobytes(), np.asarray(row["with"].controls, float).tobytes())
-    if key in _ENV_PLANS:
-        return _ENV_PLANS[key]
-    prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True, actuation=row["actuation"])
-    v = _scaled(prob, row["with"])
-    ok, steps, n_imp = env_replay(row, v)
+    if key not in _ENV_PLANS:
+        prob = Problem(row["scene"], row["task"], row["start"], row["target"], impacts=True,
+                       actuation=row["actuation"])
+        _ENV_PLANS[key] = inside_plan(row, prob, _scaled(prob, row["with"]))
+    return _ENV_PLANS[key]
+
+
+def inside_plan(row, prob, v):
+    """(scaled torques, is_success, steps, impacts, how, margin): the plan v replayed in the probe's environment; it
+    counts (is_success True) only if the episode succeeds with its end at least REPLAY_MARGIN inside the success set.
+    A minimum-time plan ends on the edge of the set, which the env's strict test can miss or meet by a rounding; then
+    the package's optimizer (solve_rows, SLSQP) re-solves the same rows from it into the set shrunk by INSIDE, and that
+    plan, verified again by simulation, hitting the wall, is replayed."""
+    from studies.optimal_control import solve_rows
+
+    ok, steps, n_imp, margin = env_replay(row, v)
     how = "the plan as found"
-    if not ok:
+    if not (ok and margin >= REPLAY_MARGIN):
         prob.tolerance *= 1.0 - INSIDE
         prob.speed_tolerance *= 1.0 - INSIDE
         K = len(v)
         sol = solve_rows(prob, K, x0=v, maxiter=100, max_rows=max(K, 40))
-        how = f"re-solved {100 * INSIDE:g} % inside the set: {sol.status.split(':')[0]}"
+        how = (f"re-solved {100 * INSIDE:g} % inside the set ({'no success' if not ok else f'ended {margin:.1e} inside'}"
+               f" as found): {sol.status.split(':')[0]}")
         if sol.ok and sol.impacts > 0:
             v = _scaled(prob, sol)
-            ok, steps, n_imp = env_replay(row, v)
-    _ENV_PLANS[key] = (v, ok, steps, n_imp, how)
-    return _ENV_PLANS[key]
+            ok, steps, n_imp, margin = env_replay(row, v)
+    return v, bool(ok and margin >= REPLAY_MARGIN), steps, n_imp, how, margin
+
+
+def recertify(path):
+    """Replay every plan of a certificates file (write_certificates) in the probe's environment with the margin rule of
+    :func:`inside_plan`, re-solving inside the set the plans that end within REPLAY_MARGIN of its edge; rewrite the
+    file with each replay's margin. The pairs, bounds and rows are kept (a re-solve keeps the rows)."""
+    import json
+
+    certs = json.loads(path.read_text())
+    for c in certs:
+        row = {k: c[k] for k in ("scene", "actuation", "task", "start", "target")}
+        prob = Problem(c["scene"], c["task"], c["start"], c["target"], impacts=True, actuation=c["actuation"])
+        v, ok, steps, n_imp, how, margin = inside_plan(row, prob, np.asarray(c["plan"], float))
+        if how != "the plan as found":
+            c["plan_from"] = how
+        c.update({"plan": np.asarray(v).tolist(), "env_success": ok, "env_steps": int(steps),
+                  "env_impacts": int(n_imp), "env_margin": float(margin)})
+    path.write_text(json.dumps(certs, indent=1) + "\n")
+    return certs
+
+
+def recertify_report(report, certs) -> int:
+    """Rewrite, in the report's list of certified pairs, how each re-solved plan was obtained (the line's
+    "(the plan as found)" becomes the certificate's plan_from); the number of lines changed."""
+    lines, changed = report.read_text().split("\n"), 0
+    for c in certs:
+        head = f"  - {c['scene']} pair {c['pair']}, {LABEL[c['actuation']]}:"
+        for i, line in enumerate(lines):
+            if line.startswith(head) and "(the plan as found)" in line and c["plan_from"] != "the plan as found":
+                lines[i] = line.replace("(the plan as found)", f"({c['plan_from']})")
+                changed += 1
+    report.write_text("\n".join(lines))
+    return changed
 
 
 def certified(row) -> bool:
@@ -669,7 +726,7 @@ def certificates(rows) -> list[str]:
             optimal.append(f"{r['scene']} pair {r['pair']} ({LABEL[r['actuation']]}, {k * r['without'].dt:.3g} s)")
         if not certified(r):
             continue
-        _, ok, steps, n_imp, how = env_certified_plan(r)
+        _, ok, steps, n_imp, how, _ = env_certified_plan(r)
         env = (f"replayed in {probe_id(r['scene'], r['actuation'])} ({how}): success at step {steps}, {n_imp} impacts"
                if ok else f"replayed in {probe_id(r['scene'], r['actuation'])} ({how}): no success (ended at step "
                f"{steps})")
@@ -876,12 +933,13 @@ def write_certificates(rows, path):
         if r["actuation"] == "steer" or not certified(r):
             continue
         k, why = lower_bound(r)
-        v, ok, steps, n_imp, how = env_certified_plan(r)
+        v, ok, steps, n_imp, how, margin = env_certified_plan(r)
         out.append({"scene": r["scene"], "pair": r["pair"], "actuation": r["actuation"], "task": r["task"],
                     "start": [float(x) for x in r["start"]], "target": [float(x) for x in r["target"]],
                     "plan": np.asarray(v).tolist(), "plan_from": how, "rows": int(r["with"].rows),
                     "impacts": int(r["with"].impacts), "bound_rows": int(k), "bound": why,
-                    "env_success": ok, "env_steps": int(steps), "env_impacts": int(n_imp)})
+                    "env_success": ok, "env_steps": int(steps), "env_impacts": int(n_imp),
+                    "env_margin": float(margin)})
     path.write_text(json.dumps(out, indent=1) + "\n")
 
 
@@ -900,7 +958,17 @@ def main(argv=None):
     ap.add_argument("--runs", type=Path, default=None, help="where the solved rows are saved (default runs/impact_oc; "
                                                            "--quick: beside the report)")
     ap.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
+    ap.add_argument("--recertify", action="store_true", help="replay the committed certificates "
+                    "(docs/optimal_control_certificates.json) with the margin rule and rewrite them (minutes)")
     args = ap.parse_args(argv)
+    if args.recertify:
+        path = ROOT / "docs" / "optimal_control_certificates.json"
+        certs = recertify(path)
+        print(f"wrote {path}: {sum(c['env_success'] for c in certs)}/{len(certs)} replayed with a margin >= "
+              f"{REPLAY_MARGIN:g}; smallest margin {min(c['env_margin'] for c in certs):.3g}")
+        n = recertify_report(ROOT / "docs" / "optimal_control.md", certs)
+        print(f"docs/optimal_control.md: {n} replay lines name their re-solved plans")
+        return path
     for name in ("pairs", "workers"):
         if getattr(args, name) < 1:
             raise SystemExit(f"--{name} must be >= 1, got {getattr(args, name)}")

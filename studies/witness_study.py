@@ -25,7 +25,7 @@ from pathlib import Path
 
 from studies.cells import TABLES, TABLE_NAMES, EXTRA_TABLES, ALL_TABLES, LAWS, PROBE_TASKS, cell_spec, all_cells, table_name
 from studies.stats import clopper_pearson
-from studies.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, learnability, theorem_of
+from studies.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, learnability, possible_by_theorem, theorem_of
 from studies.witness import PROBES, Witness, positive_int
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,7 +33,7 @@ DOCS = ROOT / "docs"
 QUICK_CELLS = (("Steer", "circle", "plastic"), ("Drive", "ellipse", "elastic"), ("Drive", "plane", "-"),
                ("Steer", "circle_r0.5", "0.5"))
 CELL_FIELDS = ["probe", "table", "law", "env_id", "overrides", "pairs", "witnessed", "rate", "ci_low", "ci_high",
-               "seconds", "excluded", "excluded_by", "verdict"]
+               "seconds", "excluded", "excluded_by", "possible", "possible_by", "verdict"]
 PAIR_FIELDS = ["probe", "table", "law", "seed", "witnessed", "steps", "impacts", "params", "theorem", "reason"]
 README_BEGIN = "<!-- witness-answer: written by python -m studies.witness_study (studies/witness_study.py) -->"
 README_END = "<!-- /witness-answer -->"
@@ -97,12 +97,14 @@ def cell_rows(pair_rows, seconds):
     for (probe, table, law), rs in cells.items():
         k, n = sum(int(r["witnessed"]) for r in rs), len(rs)
         ex, by = excluded_of(rs)
+        pos, pos_by = possible_of(rs)
         lo, hi = clopper_pearson(k, n)
         env_id, over = cell_spec(probe, table, law)
         out.append({"probe": probe, "table": table, "law": law, "env_id": env_id,
                     "overrides": " ".join(f"{a}={b}" for a, b in over.items()), "pairs": n, "witnessed": k,
                     "rate": k / n, "ci_low": lo, "ci_high": hi, "seconds": round(seconds.get((probe, table, law), 0.0), 1),
-                    "excluded": ex, "excluded_by": by, "verdict": cell_verdict(probe, table, k, n, law, ex, by)})
+                    "excluded": ex, "excluded_by": by, "possible": pos, "possible_by": pos_by,
+                    "verdict": cell_verdict(probe, table, k, n, law, ex, by, pos, pos_by)})
     return out
 
 
@@ -110,6 +112,13 @@ def excluded_of(pair_rows):
     """(pairs a theorem excludes, their theorem ids joined by ', ') of one cell's pair rows."""
     ids = [r.get("theorem", "") for r in pair_rows if r.get("theorem", "")]
     return len(ids), ", ".join(sorted(set(ids)))
+
+
+def possible_of(pair_rows):
+    """(pairs a theorem proves possible given enough time, their theorem ids) of one cell's pair rows: recomputed from
+    the pairs' seeds by the theory's code (studies/verdict.possible_by_theorem), never read from a CSV."""
+    r0 = pair_rows[0]
+    return possible_by_theorem(r0["probe"], r0["table"], r0["law"], tuple(int(r["seed"]) for r in pair_rows))
 
 
 def read_csv(path):
@@ -241,7 +250,9 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
     law_names = " · ".join(LAWS[law].lower() if law != "0.5" else "e = 0.5" for law in LAWS)
     lines = [f"Answer from theorems and certified witness episodes ([{report}]({report}); theory: "
              f"[docs/{THEORY_DOC}](docs/{THEORY_DOC})). Per table: **impossible (theorem)**, or the pairs witnessed "
-             f"k/N per law ({law_names}; the plane has no walls, one run for every law), **open** where none was:", "",
+             f"k/N per law ({law_names}; the plane has no walls, one run for every law), with the pairs a **theorem** "
+             "proves possible given enough time (T8: steer only on the tables with parallel flat sides, from starts "
+             "with room), **open** where none was:", "",
              "| actuation | " + " | ".join(TABLE_NAMES[t] for t in TABLES) + " |",
              "| --- |" + " --- |" * len(TABLES)]
     for probe in PROBES:
@@ -265,6 +276,14 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
             low = min(clopper_pearson(int(c["witnessed"]), int(c["pairs"]))[0] for c in wit)
             bits.append(f"possible in {len(wit)} cells, witnessed in {_span(rates, '.0%')} of the "
                         f"pairs per cell (lowest exact 95 % lower bound {low:.2f})")
+        thm = [c for c in wit if int(c.get("possible", 0) or 0)]
+        if thm:
+            ids = sorted({i.strip() for c in thm for i in c["possible_by"].split(",")})
+            names = sorted({table_name(c["table"]) for c in thm}, key=[table_name(x) for x in ALL_TABLES].index)
+            shares = [int(c["possible"]) / int(c["pairs"]) for c in thm]
+            bits.append(f"given enough time, a theorem ({', '.join(ids)}) proves it possible in {len(thm)} of these "
+                        f"cells ({' and '.join(names)}) for {_span(shares, '.0%')} of the pairs per cell (the starts "
+                        f"with room to aim)")
         if opn:
             bits.append(f"open in {len(opn)} cells")
         shares, succ = [], []
@@ -291,9 +310,12 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
 
 
 def _count_md(c) -> str:
-    """'k/N' of a cell, with the pairs a theorem excludes ('k/N, m impossible (T2.5)'), or 'open'."""
+    """'k/N' of a cell, with the pairs a theorem excludes ('k/N, m impossible (T2.5)') or proves possible given enough
+    time ('k/N (theorem T8.1: p/N)'), or 'open'."""
     ex = int(c.get("excluded", 0) or 0)
+    pos = int(c.get("possible", 0) or 0)
     tail = f", {ex} impossible ({c['excluded_by']})" if ex else ""
+    tail += f" (**theorem** {c['possible_by']}: {pos}/{c['pairs']})" if pos else ""
     if c["verdict"].startswith("open"):
         return f"open (0/{c['pairs']}{tail})"
     return f"{c['witnessed']}/{c['pairs']}{tail}"
@@ -329,7 +351,11 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
              f"Per (actuation, law, table): **impossible (theorem Tk)** where [{THEORY_DOC}]({THEORY_DOC}) proves "
              "the probe's task unreachable from every start/target pair the cell can draw (its table, spawn and target "
              "regions, time limit and speeds); where a theorem excludes only some of the N pairs drawn, the count "
-             "follows the witnessed one (\"m/N impossible, theorem Tk\"); **possible (witnessed k/N)** where at least one of N "
+             "follows the witnessed one (\"m/N impossible, theorem Tk\"); **possible (theorem Tk for p/N pairs, given enough "
+             "time; witnessed k/N)** where a theorem proves the task possible, without a time limit but within the probe's "
+             "own control rows and torque limit, for p of the N pairs (T8.1 and T8.2: steer only on the tables with "
+             "parallel flat sides, from starts with room to aim; the circle's T7.2 and T7.4, stated for torques that "
+             "switch at any instant, are not counted here); **possible (witnessed k/N)** where at least one of N "
              "start/target pairs of the probe's own distribution was solved by an episode of the package's "
              "environment ending with `is_success` (studies/witness.py); **open** otherwise. A witness in a "
              "theorem's cell would be a contradiction and stops the report (studies/verdict.py). The open plane "
@@ -422,9 +448,13 @@ def main(argv=None):
         meta_json.write_text(json.dumps(meta, indent=1))
     cells.sort(key=_order)
     for c in cells:  # the verdict recomputed from the counts (a CSV edited by hand cannot carry another)
-        c["excluded"], c["excluded_by"] = excluded_of([r for r in pair_rows if _key(r) == _key(c)])
+        mine = [r for r in pair_rows if _key(r) == _key(c)]
+        c["excluded"], c["excluded_by"] = excluded_of(mine)
+        c["possible"], c["possible_by"] = possible_of(mine)
         c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"],
-                                    c["excluded"], c["excluded_by"])
+                                    c["excluded"], c["excluded_by"], c["possible"], c["possible_by"])
+    if args.report_only:  # (the cells' CSV carries the recomputed verdicts; the pairs' CSV and the counts are kept)
+        write_csv(cells_csv, cells, CELL_FIELDS)
     rl = study_rl(args.study_csv)
     write_report(out_dir / "witnesses.md", cells, pair_rows, rl, meta)
     print(f"wrote {out_dir / 'witnesses.md'}")

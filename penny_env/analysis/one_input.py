@@ -93,3 +93,27 @@ def release_cycles(phi_dot_stop, a1, free_angle) -> int:
     cycle (brake at a1 over the free angle, then the release) lowers phi_dot_stop^2 by 2 a1 free_angle (T7.4)."""
     need = phi_dot_stop * phi_dot_stop - 2.0 * a1 * free_angle
     return 0 if need < 0 else int(math.floor(need / (2.0 * a1 * free_angle))) + 1
+
+
+# -- the hypotheses ("room to aim") of T7.2 and T7.4 -------------------------------------------------------------
+def circle_aim_time(phi_dot, a1, max_turn=math.pi) -> float:
+    """tau0: brake the spin (|phi_dot| / a1), then a rest-to-rest turn by at most max_turn (2 sqrt(max_turn / a1)):
+    T7.2 aims with turns up to pi, T7.4 up to pi / 2."""
+    return abs(phi_dot) / a1 + 2.0 * math.sqrt(max_turn / a1)
+
+
+def circle_ladder_room(radius, z0, v0, tau0, R):
+    """T7.2's room: (holds, margins). The disk of radius rho = v0 tau0 about z0 has clearance > R (radius - |z0| - rho
+    > R) and does not contain the centre (|z0| > rho)."""
+    r, rho = math.hypot(z0[0], z0[1]), v0 * tau0
+    margins = (radius - r - rho - R, r - rho)
+    return all(m > 0 for m in margins), margins
+
+
+def circle_stop_room(radius, z0, v0, tau0, R, beta):
+    """T7.4's room: (holds, margins). With rho = v0 tau0 and d* = radius sin(beta): the disk of radius rho about z0
+    has clearance > R, and rho < d* < |z0| - rho, so that the heading line's distance |z x e| from the centre is below
+    d* where e is parallel to z0 and above it where e is perpendicular (both within a quarter turn either way)."""
+    r, rho, d = math.hypot(z0[0], z0[1]), v0 * tau0, stop_chord_distance(radius, beta)
+    margins = (radius - r - rho - R, d - rho, r - rho - d)
+    return all(m > 0 for m in margins), margins

@@ -717,51 +717,28 @@ def test_t4_1_an_explicit_park_without_impacts():
         env.close()
 
 
-def _creep_turn(start, g, table, k, dt=0.05):
-    """T6.1's turn: the heading change delta (turned rest to rest in k steps at scaled steering torques) after which
-    the penny, creeping at its rolling speed all along, heads straight at g: a zero of the circle map
-    f(delta) = angle(g - c'(delta)) - (heading after the turn, reversed when rolling backwards), which winds once
-    less than its second term as delta runs over [-pi, pi) (the proof's degree argument), found by a scan and
-    bisection on the simulator. (delta, scaled torques of the turn)."""
-    a1 = U1 / P.J
-    back = math.pi if start[4] < 0 else 0.0
-
-    def turn(delta):
-        return _rest_to_rest(delta / (a1 * dt * dt), k)
-
-    def f(delta):
-        traj = simulate(start, table=table, controls=[[c * U1, 0.0] for c in turn(delta)], control_dt=dt)
-        s = traj.final_state
-        return (math.atan2(g[1] - s[1], g[0] - s[0]) - s[3] - back + math.pi) % (2 * math.pi) - math.pi
-    grid = np.linspace(-math.pi, math.pi, 65)
-    vals = [f(d) for d in grid]
-    for lo, hi, flo, fhi in zip(grid[:-1], grid[1:], vals[:-1], vals[1:]):
-        if flo * fhi <= 0 and abs(flo - fhi) < math.pi:  # a zero, not the wrap of the angle
-            for _ in range(40):
-                mid = 0.5 * (lo + hi)
-                fm = f(mid)
-                lo, hi, flo = (mid, hi, fm) if fm * flo > 0 else (lo, mid, flo)
-            return lo, turn(lo)
-    raise AssertionError("no zero of the circle map")
-
-
 def test_t6_1_a_slow_steer_only_penny_parks_anywhere_it_can_creep():
     """T6.1 (proposition, constructive): a steer-only penny creeping at 0 < |R theta_dot| < v_tol parks at any target
-    whose path keeps the ends off the wall: turn rest to rest (at most 2 sqrt(pi / a1) = 1.12 s, the contact point
-    moving at most 1.12 |R theta_dot| meanwhile) to the heading whose straight continuation passes through the target
-    (it exists by the degree argument), then creep straight through it. Through PennyProbeSteer-Ellipse-Elastic-v0
-    from such starts (the probe's own tolerances, 20 s) the plan ends with is_success and no impact."""
+    whose path keeps the ends off the wall: turn rest to rest by some delta with |delta| <= 2 pi (32 rows of 0.05 s,
+    the contact point moving at most 1.6 |R theta_dot| meanwhile) to the heading whose straight continuation passes
+    through the target (it exists by the degree argument; flat_sides.aim_through finds it on the simulator), then
+    creep straight through it. Through PennyProbeSteer-Ellipse-Elastic-v0 from such starts (the probe's own
+    tolerances, 20 s) the plan ends with is_success and no impact."""
+    from penny_env.analysis import flat_sides as fs
+
     dt = 0.05
     rng = np.random.default_rng(23)
     table = TABLES["ellipse"]
     env = gym.make("PennyProbeSteer-Ellipse-Elastic-v0", backend="python")
-    k = 2 * math.ceil(math.sqrt(math.pi / (U1 / P.J * dt * dt)))
+    steering = fs.Steering(table, "elastic", P, U1 / P.J, dt)
+    tau = fs.aim_time(U1 / P.J, 2 * math.pi, dt)
+    assert tau == pytest.approx(1.6) and fs.aim_time(U1 / P.J) == pytest.approx(2 * math.sqrt(2 * math.pi / 10), 1e-9)
     for trial in range(4):
         S = interior_states(table, 1, rng, W=(-0.9, 0.9), w=(0.0, 0.0), fraction=0.4)[0]
         S[4] = math.copysign(max(abs(S[4]), 0.4), S[4])  # 0.004 <= |R theta_dot| <= 0.009 m/s
         g = S[:2] + rng.uniform(0.03, 0.06) * np.array([math.cos(a := rng.uniform(-math.pi, math.pi)), math.sin(a)])
-        delta, turn = _creep_turn(S, g, table, k)
-        straight = math.ceil((np.hypot(*(g - S[:2])) + 1.12 * abs(P.R * S[4])) / abs(P.R * S[4]) / dt) + 2
+        turn, delta = fs.aim_through(S, g, steering)
+        straight = math.ceil((np.hypot(*(g - S[:2])) + tau * abs(P.R * S[4])) / abs(P.R * S[4]) / dt) + 2
         actions = turn + [0.0] * straight
         assert len(actions) * dt <= 20.0
         env.reset(options={"state": S, "target": g})
@@ -807,7 +784,8 @@ def test_theory_page_names_only_tests_that_exist():
     here = pathlib.Path(__file__)
     defined = set()
     for f in (here, here.with_name("test_controllability_bounds.py"),  # the theorems that decide cells live there
-              here.with_name("test_one_input.py")):  # and T7, one input approximately
+              here.with_name("test_one_input.py"),  # T7, one input approximately
+              here.with_name("test_flat_sides.py")):  # T8, steer only on tables with parallel flat sides
         defined |= set(re.findall(r"^def (test_[a-z0-9_]+)", f.read_text(), re.M))
     assert cited and cited <= defined, sorted(cited - defined)
     assert sorted(defined - cited) == ["test_impact_geometry_refuses_bad_input", "test_theory_page_names_only_tests_that_exist"]

@@ -223,6 +223,46 @@ def test_both_bound_validated_pieces():
         assert moved <= up
 
 
+def enclosure_violations(Ks=(4, 10, 20), h_steps=2, m=64):
+    """Where the directional programme's value is below what a simulated plan travels along the direction, or more
+    than R a2 dt T / m above it: rolling at full torque along the heading (psi = phi0) and at full reverse torque
+    against it (psi = phi0 + pi), no steering, on the open plane, no end condition. The programme runs at 2 cells per
+    a2 dt and 64 parts per row (every resolution is rigorous): the parts' slack (about R a2 dt T / (2 m)) is then far
+    below half a cell, so a programme that took each theta_dot cell to be its midpoint (not an enclosure) falls below
+    these plans, which run along the cells' edges, by about R h T / 2."""
+    prob = _extremal_both_cases()[0][0]
+    a1, a2 = oc_bounds.accelerations(prob)
+    s0, R, dt = prob.start, prob.params.R, prob.dt
+    bad = []
+    for K in Ks:
+        for sign in (1.0, -1.0):
+            u = np.zeros((K, 2))
+            u[:, 1] = sign * prob.limits[1]
+            tr = pe.simulate(s0, params=prob.params, table=None, law=prob.law, controls=u, control_dt=dt)
+            psi = s0[3] + (0.0 if sign > 0 else math.pi)
+            moved = math.cos(psi) * (tr.final_state[0] - s0[0]) + math.sin(psi) * (tr.final_state[1] - s0[1])
+            up = both_bound.displacement_upper(s0[4], s0[3], s0[5], psi, R, a1, a2, dt, K, math.inf, h_steps, m)
+            if not moved <= up <= moved + R * a2 * dt * K * dt / m:
+                bad.append(f"K = {K}, torque {sign:+.0f}: the programme's {up:.6g} m, the plan's {moved:.6g} m")
+    return bad
+
+
+def test_both_bound_encloses_the_rolling_speed_cells():
+    """The directional programme is at least the displacement of the full-torque plans, which run along the cells'
+    edges, and within R a2 dt T / m of it (tight on these plans)."""
+    assert enclosure_violations() == []
+
+
+def test_both_bound_check_fails_when_the_cells_are_their_midpoints(monkeypatch):
+    """The mutation of the referee: the rolling-speed cells replaced by their midpoints (no enclosure), which changes
+    none of the 5 certified bounds, falls below every full-torque plan here."""
+    def midpoints(w0, h, N):
+        mid = w0 + (np.arange(-N, N, dtype=float) + 0.5) * h
+        return mid, mid
+    monkeypatch.setattr(both_bound, "cell_enclosures", midpoints)
+    assert len(enclosure_violations()) == 6
+
+
 # -- the certified pairs of the report (docs/optimal_control_certificates.json) -------------------------------
 def _certificates():
     import json
@@ -257,3 +297,38 @@ def test_a_certified_pair_replays_in_the_env_and_beats_the_bound(actuation):
                    actuation=actuation)
     K, _ = oc_bounds.rows_lower_bound(prob, actuation, max_rows=c["rows"] + 1)
     assert K > c["rows"]
+
+
+def test_every_certified_plan_replays_with_a_margin():
+    """Every certificate's plan replays in the probe's environment to success with its end at least REPLAY_MARGIN
+    (1e-9) inside the success set, the margin the file records; a plan that met the strict test by a rounding (the
+    referee's stadium pair 1 ended 3e-15 m inside its 0.015 m tolerance; three more did) is re-solved inside by
+    `python -m studies.impact_oc --recertify`."""
+    for c in _certificates():
+        row = {k: c[k] for k in ("scene", "actuation", "task", "start", "target")}
+        ok, steps, n_imp, margin = io.env_replay(row, np.asarray(c["plan"], float))
+        assert ok and steps == c["env_steps"] == c["rows"] and n_imp == c["env_impacts"], (c["scene"], c["pair"])
+        assert margin >= io.REPLAY_MARGIN and margin == pytest.approx(c["env_margin"], abs=1e-15), (c, margin)
+
+
+def test_a_plan_that_ends_within_the_margin_is_resolved_inside():
+    """The margin rule of studies.impact_oc.inside_plan: the same plan, with its target moved so that it ends 5e-10 m
+    inside the tolerance, succeeds in the env yet is not counted as found: it is re-solved into the shrunk set and the
+    re-solved plan replays with a margin."""
+    c = min((c for c in _certificates() if c["actuation"] == "drive"), key=lambda c: c["rows"])
+    row = {k: c[k] for k in ("scene", "actuation", "task", "start", "target")}
+    v = np.asarray(c["plan"], float)
+    prob = Problem(c["scene"], c["task"], np.array(c["start"]), np.array(c["target"]), impacts=True,
+                   actuation="drive")
+    u = np.zeros((len(v), 2))
+    u[:, 1] = v[:, 1] * prob.limits[1]
+    end = pe.simulate(prob.start, params=prob.params, table=prob.table, law=prob.law, controls=u,
+                      control_dt=prob.dt).final_state[:2]
+    away = (np.asarray(c["target"]) - end) / np.linalg.norm(np.asarray(c["target"]) - end)
+    row["target"] = list(end + (prob.tolerance - 5e-10) * away)
+    ok, _, _, margin = io.env_replay(row, v)
+    assert ok and 0 < margin < io.REPLAY_MARGIN
+    prob = Problem(c["scene"], c["task"], np.array(c["start"]), np.array(row["target"]), impacts=True,
+                   actuation="drive")
+    v2, ok2, _, _, how, margin2 = io.inside_plan(row, prob, v)
+    assert how.startswith("re-solved") and ok2 and margin2 >= io.REPLAY_MARGIN

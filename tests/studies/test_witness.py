@@ -194,6 +194,11 @@ def test_verdict_rules():
         "possible (witnessed 3/40; 21/40 impossible, theorem T2.5)"
     assert cell_verdict("Steer", "circle_r0.35", 0, 40, "0.5", 21, "T2.5") == "open (21/40 impossible, theorem T2.5)"
     assert cell_verdict("Steer", "circle_r0.5", 0, 5, "0.5", 5, "T2.5") == "impossible (theorem T2.5)"
+    assert cell_verdict("Steer", "stadium", 200, 200, "plastic", 0, "", 78, "T8.1") == \
+        "possible (theorem T8.1 for 78/200 pairs, given enough time; witnessed 200/200)"
+    assert cell_verdict("Steer", "stadium", 0, 200, "elastic", 0, "", 80, "T8.2").startswith("possible (theorem T8.2")
+    with pytest.raises(ValueError, match="possible"):
+        cell_verdict("Steer", "stadium", 0, 200, "elastic", 0, "", 201, "T8.2")
     with pytest.raises(ValueError, match="excluded"):
         cell_verdict("Steer", "circle", 30, 30, "elastic", 1, "T2.5")
 
@@ -290,9 +295,15 @@ def test_readme_answer_is_the_verdict_tables():
     cells = ws.read_csv(cells_csv)
     pairs = ws.read_csv(ROOT / "docs" / "witnesses_pairs.csv")
     for c in cells:
-        ex, by = ws.excluded_of([r for r in pairs if ws._key(r) == ws._key(c)])
+        mine = [r for r in pairs if ws._key(r) == ws._key(c)]
+        ex, by = ws.excluded_of(mine)
         assert (ex, by) == (int(c["excluded"]), c["excluded_by"])
-        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"], ex, by)
+        pos, pos_by = ws.possible_of(mine)  # (recomputed by the theory's code from the pairs' seeds)
+        assert (pos, pos_by) == (int(c["possible"]), c["possible_by"])
+        c["verdict"] = cell_verdict(c["probe"], c["table"], int(c["witnessed"]), int(c["pairs"]), c["law"], ex, by,
+                                    pos, pos_by)
+        assert c["verdict"].startswith("possible (theorem T8") == (c["probe"] == "Steer" and c["table"] in (
+            "stadium", "rounded_rectangle"))
     block = text.split(ws.README_BEGIN, 1)[1].split(ws.README_END, 1)[0].strip()
     assert block == ws.readme_answer(cells, ws.study_rl(ROOT / "docs" / "study.csv"))
     # every probe x table x law cell was run
