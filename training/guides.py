@@ -12,10 +12,10 @@ own time limit. The learner is trained on its own steps only (the guided steps a
 
 Two schedules of the hand-over step h:
 
-* ``jsrl`` (JSRL's curriculum): one hand-over fraction f for every demonstration, h_j = round(f T_j) (T_j its
-  length), from f = 1 - ``step`` down by ``step`` each time the learner's success over at least ``min_episodes``
-  guided episodes (all demonstrations together) at the current f reaches ``threshold``; at f = 0 the demonstration
-  only chooses the start.
+* ``jsrl`` (JSRL's curriculum with random switching): one hand-over fraction f for every demonstration, the
+  hand-over step of an episode drawn uniformly in [0, f T_j] (T_j the demonstration's length), f from 1 - ``step``
+  down by ``step`` each time the learner's success over at least ``min_episodes`` guided episodes (all
+  demonstrations together) at the current f reaches ``threshold``; at f = 0 the demonstration only chooses the start.
 * ``curriculum`` (a start-state curriculum with a success filter, DemoStart, arXiv 2409.06613, and RFCL, arXiv
   2405.03379): one hand-over step per demonstration, moved back by ``step`` T_j once the learner succeeds from it in
   at least ``threshold`` of at least ``min_episodes`` episodes of that demonstration; a demonstration solved from its
@@ -108,7 +108,10 @@ class Guide:
         g = np.flatnonzero(guided)
         if len(g):
             j = opened[self.rng.integers(0, len(opened), len(g))]
-            h = np.round(self.frac[j] * self.T[j]).astype(np.int64)
+            # JSRL's random switching: the hand-over anywhere up to the stage's step (so the learner also sees
+            # earlier hand-overs, down to the start, while a stage lasts), the curriculum's at the stage's step
+            f = self.frac[j] * (self.rng.random(len(g)) if self.schedule == "jsrl" else 1.0)
+            h = np.round(f * self.T[j]).astype(np.int64)
             h = np.where(self.done[j], 0, np.minimum(h, self.T[j] - 1))
             for r, d in zip(g, j):
                 states[r], targets[r] = self.episodes[d][0][0], self.episodes[d][1]

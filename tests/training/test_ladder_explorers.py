@@ -136,7 +136,7 @@ def test_a_guided_episode_is_its_witness_until_the_hand_over(tmp_path):
     demos = load_demos(path)
     vec = A.make_vec(DRIVE, 3)
     vec.reset(seed=10_000_000)
-    g = guides.Guide(demos, 3, np.random.default_rng(0), "jsrl", step=0.0, p_own=0.0)
+    g = guides.Guide(demos, 3, np.random.default_rng(0), "curriculum", step=0.0, p_own=0.0)
     g.frac[:] = 1.0  # hand over at the last step
     rows = np.arange(3)
     S, G, guided = g.start(rows)
@@ -159,7 +159,7 @@ def test_the_jsrl_schedule_moves_the_hand_over_back_for_every_demonstration():
              "step": np.r_[np.arange(5), np.arange(7)], "length": np.array([4, 6]), "actions": np.zeros((10, 1))}
     g = guides.Guide(demos, 4, np.random.default_rng(0), "jsrl", step=0.5, threshold=0.5, min_episodes=4, p_own=0.0)
     g.start(np.arange(4))
-    assert (g.left == np.round(0.5 * g.T[g.demo])).all()
+    assert ((0 <= g.left) & (g.left <= np.round(0.5 * g.T[g.demo]))).all()  # (random switching up to f T)
     g.record(np.arange(4), np.array([1, 1, 0, 0], bool))  # 2 of 4 at f = 0.5: the hand-over moves to f = 0
     assert (g.frac == 0).all() and (g.stage == 1).all()
     g.start(np.arange(2))
