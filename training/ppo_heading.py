@@ -98,7 +98,7 @@ class Args:
     std_min: float = 0.15  # noise floor and ceiling (the log-std is clamped)
     std_max: float = 2.0
     norm_coef: float = 0.1  # pulls the heading 2-vector's length to 1 (its angle's gradient stays bounded)
-    heading_init: float = 0.01  # the heading 2-vector's output weights' scale at the start (guided runs: 1, below)
+    heading_init: float = 0.01  # the heading 2-vector's output weights' scale at the start
     v_flat: float = 0.5  # park potential: speeds under this x speed_tolerance count as 0
     desync: bool = True
     val_every: int = 5_000_000  # env steps between validation evaluations (0: none)
