@@ -192,3 +192,53 @@ def test_draws_are_the_same_bits_compiled_and_at_extreme_keys():
         obs = [e.reset(seed=seed)[0] for e in envs]
         assert np.array_equal(*obs) and np.array_equal(envs[0].states, envs[1].states)
     assert seed_keys([2**64 - 1]).dtype == np.uint64
+
+
+# bounds at which float32 and float64 part: 0.1 and 1/3 are not float32 numbers (float32(0.1) > 0.1, float32(1/3) <
+# 1/3), 1.5 is; 1e-40 is a float32 subnormal; 3e38 lies near the top of float32's range
+GUARD_BOUNDS = ((0.0, 0.1), (-0.1, 1 / 3), (-1.5, 1.5), (-1e-40, 1e-40), (-3e38, 3e38), (0.7, 0.70000001))
+
+
+def _float32_neighbours(v):
+    """The float32 entries around bound v: its own float32, one step down and one up, and v's float64 itself."""
+    f = np.float32(v)
+    return [np.nextafter(f, np.float32(-np.inf)), f, np.nextafter(f, np.float32(np.inf)), np.float32(np.float64(v))]
+
+
+@needs_numba
+@pytest.mark.fast
+def test_the_generated_task_output_guard_agrees_with_the_observation_space_bound_by_bound():
+    # the compiled guard compared the float32 entry float32(0.1) = 0.10000000149 with the float64 literal 0.1 and ended
+    # every numba episode of a task that writes its declared bound 0.1 (limit 8), which observation_space contains
+    import numba
+    from gymnasium import spaces
+
+    from penny_env.backends.env import obs_bounds_check
+    guard = obs_bounds_check(GUARD_BOUNDS)
+    compiled = numba.njit(cache=False)(guard)
+    lo = np.array([-1.0] * 10 + [b[0] for b in GUARD_BOUNDS], np.float32)
+    hi = np.array([1.0] * 10 + [b[1] for b in GUARD_BOUNDS], np.float32)
+    space = spaces.Box(lo, hi, dtype=np.float32)
+    obs = np.zeros((1, len(lo)), np.float32)
+    obs[0, 10:] = (lo[10:] + hi[10:]) / 2  # (every entry inside; each case below moves one)
+    checked = 0
+    for j, (a, b) in enumerate(GUARD_BOUNDS):
+        for v in _float32_neighbours(a) + _float32_neighbours(b) + [np.float32(np.nan)]:
+            row = obs.copy()
+            row[0, 10 + j] = v
+            inside = bool(space.contains(row[0]))
+            assert bool(guard(row, 0)) is inside and bool(compiled(row, 0)) is inside, (j, float(v), inside)
+            checked += inside
+    assert checked >= 4 * len(GUARD_BOUNDS)  # (both bounds of every entry accepted: the comparisons are not all False)
+
+
+@pytest.mark.fast
+def test_extra_obs_bounds_beyond_float32_are_refused_naming_the_entry():
+    @dataclass(frozen=True)
+    class Cfg(Task):
+        kind: str = "t10"
+
+    with pytest.raises(ValueError, match=r"extra_obs\[1\] = \(0\.0, 1e\+39\) must be within the float32 range"):
+        register_task(TaskRecord("t10", Cfg, lambda s, t, L: _K(1.0), _stage, reach.target, lambda k, st, obs, i: None,
+                                 ((0.0, 1.0), (0.0, 1e39))))
+    assert "t10" not in TASKS
