@@ -19,7 +19,7 @@ from ..physics.flows import end_kinematics
 from ..physics.params import MAX_ANGULAR_SPEED
 from ..physics.validation import as_state, check_inside, real_array
 
-from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT
+from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT, OBS_BOUND, TARGET_OBS_BOUND
 from ..step.config import ConfigError
 from ..step.draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
 from .scene import Scene, Task
@@ -153,9 +153,11 @@ class Core:
 
     # -- spaces --------------------------------------------------------------------------
     def obs_bounds(self):
-        hi = np.ones(self.obs_dim, dtype=np.float32)
+        """(low, high) float32 of the observation space: functional.OBS_BOUND and TARGET_OBS_BOUND for the entries
+        every task has, the task's extra_obs (rounded to float32, as the step's guard compares them) for its own."""
+        hi = np.full(self.obs_dim, OBS_BOUND, dtype=np.float32)
         if not self.plane:
-            hi[8:10] = 2.0
+            hi[8:10] = TARGET_OBS_BOUND
         lo = -hi
         for j, (a, b) in enumerate(self.task_record.extra_obs):  # the task's own entries
             lo[10 + j], hi[10 + j] = a, b

@@ -242,3 +242,44 @@ def test_extra_obs_bounds_beyond_float32_are_refused_naming_the_entry():
         register_task(TaskRecord("t10", Cfg, lambda s, t, L: _K(1.0), _stage, reach.target, lambda k, st, obs, i: None,
                                  ((0.0, 1.0), (0.0, 1e39))))
     assert "t10" not in TASKS
+
+
+def _far_target(k, p, m, s, trig, base, xp):
+    return 1e6, -1e6, 1.0, 0.0
+
+
+@pytest.mark.fast
+def test_a_target_off_the_table_is_refused_when_the_task_is_registered():
+    # it passed register_task, and the observations then left observation_space (5e6 where it says [-2, 2]), limit 0
+    with pytest.raises(ValueError, match=r"register_task\('far'\): target returned the target \(1e\+06, -1e\+06\) m, "
+                                         r"which puts the observation's target entries obs\[8:10\].*outside the "
+                                         r"observation space's \[-2, 2\]"):
+        register_task(TaskRecord("far", reach.ReachTask, reach.constants, reach.reward, _far_target))
+    assert "far" not in TASKS
+
+
+def _check_target_guard(obs, trunc, info, space):
+    assert trunc[0] and info["limit"][0] == 8 and not space.contains(obs[0])
+    assert not trunc[1] and info["limit"][1] == 0 and space.contains(obs[1])
+
+
+@pytest.mark.parametrize("backend", ["python", pytest.param("numba", marks=needs_numba)])
+def test_a_target_that_leaves_the_observation_space_ends_the_episode_with_limit_task_output(backend):
+    # the run-time guard checked the target's finiteness only: a target off the table gave observations outside
+    # observation_space with limit 0 and no warning, on every backend
+    env = PennyVectorEnv(2, "ellipse", "reach", backend=backend)
+    env.reset(seed=0)
+    host = env._runner.state_to_host()
+    host.target[:, 0] = (1e6, -1e6)  # (what a task's target stage that slipped past its trials could draw)
+    env._runner.state_from_host(host)
+    obs, _, _, trunc, info = env.step(np.zeros((2, 2), np.float32))
+    _check_target_guard(obs, trunc, info, env.single_observation_space)
+    single = PennyEnv("ellipse", "reach", backend=backend)
+    single.reset(seed=0)
+    single._target = (0.0, 0.399)  # (2 table sizes from the centre: obs[8] near 2, inside the space; then past it)
+    o, _, _, tr, i = single.step(np.zeros(2, np.float32))
+    assert single.observation_space.contains(o) and i["limit"] == 0 and not tr
+    single._target = (0.0, 0.5)
+    with pytest.warns(RuntimeWarning, match="task_output"):
+        o, _, _, tr, i = single.step(np.zeros(2, np.float32))
+    assert not single.observation_space.contains(o) and i["limit"] == 8 and tr
