@@ -9,7 +9,7 @@ from __future__ import annotations
 import contextlib
 import threading
 
-from .numba_repairs import repair_numba_cache
+from .numba_repairs import keep_numbas_own, plain_method, repair_numba_cache
 
 
 @contextlib.contextmanager
@@ -49,13 +49,27 @@ def guard_llvmlite_close(classes=None) -> None:
     ("free(): double free detected in tcache 2", ``OutputString.close`` from ``__del__``, seen with a SIGINT every 3
     ms around the batch API). Both ``close`` methods are wrapped once per process so that a SIGINT arriving in them
     is held and raised again (``signal.raise_signal``) right after: the interrupt still comes, one close later.
-    Main thread only (Python delivers signals there); llvmlite's own behaviour is otherwise unchanged."""
+    Main thread only (Python delivers signals there); llvmlite's own behaviour is otherwise unchanged. A class or a
+    ``close`` that is not as expected (another llvmlite: a renamed class, a ``close`` that is no plain method) is left
+    as it is, with one logged line (numba_repairs.keep_numbas_own)."""
     import signal
     if classes is None:
-        from llvmlite.binding import ffi
-        classes = (ffi.OutputString, ffi.ObjectRef)
+        try:
+            from llvmlite.binding import ffi
+        except ImportError:
+            return
+        classes = []
+        for name in ("OutputString", "ObjectRef"):
+            cls = getattr(ffi, name, None)
+            if isinstance(cls, type):
+                classes.append(cls)
+            else:
+                keep_numbas_own(f"llvmlite.binding.ffi.{name}", "so a Ctrl-C inside its close is not held")
     for cls in classes:
-        close = cls.close
+        close = plain_method(cls, "close", ("self",), "penny_env_guarded")
+        if close is None:
+            keep_numbas_own(f"{cls.__module__}.{cls.__qualname__}.close", "so a Ctrl-C inside it is not held")
+            continue
         if getattr(close, "penny_env_guarded", False):
             continue
 
