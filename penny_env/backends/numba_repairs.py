@@ -1,4 +1,4 @@
-"""Two defects of numba's disk cache (numba 0.61-0.68), repaired once per process by :func:`repair_numba_cache`
+"""Three defects of numba's disk cache (numba 0.61-0.68), repaired once per process by :func:`repair_numba_cache`
 (called by interrupts.load_numba before penny_env compiles or loads anything), each wrapping one private numba
 method and otherwise leaving numba as it is.
 
@@ -16,6 +16,11 @@ method and otherwise leaving numba as it is.
    repair gives a cached load's machine code its record back, so the callers compiled from it keep it; the
    callers cached before the repair are covered by threads.locked, which launches numba's threads before a
    parallel loop's first call.
+3. Damaged cache files (:func:`recompile_damaged_cache_entries`). numba unpickles its index (``.nbi``) and data
+   (``.nbc``) files as they are: one truncated file (a half-written copy of ~/.cache, a disk error) made every
+   later process that loads that function fail with a bare ``_pickle.UnpicklingError`` naming neither the file
+   nor the remedy. A file that does not unpickle is now a miss, as a missing file is for numba: the function
+   compiles again, numba's next save rewrites the entry, and one warning names the file.
 
 Each repair wraps internals as numba 0.61 to 0.68 (:data:`KNOWN_NUMBA`, the versions tests/backends/
 test_numba_repairs.py holds them to) define them. Before it wraps one, it checks that the internal is there and of
@@ -31,6 +36,7 @@ import types
 
 KNOWN_NUMBA = ((0, 61), (0, 68))  # the numba releases (major, minor) the repairs are known for, both included
 _REPORTED: set = set()  # the internals found otherwise (logged once per process each)
+_DAMAGED: set = set()   # the damaged cache files reported (once per process each)
 
 
 def numba_version() -> tuple:
@@ -146,7 +152,59 @@ def keep_parallel_init_on_cached_loads() -> bool:
     return True
 
 
+def report_damaged_file(path, exc) -> None:
+    """The warning of a damaged cache file (module docstring, 3), once per process and file."""
+    if path in _DAMAGED:
+        return
+    _DAMAGED.add(path)
+    logging.getLogger("penny_env").warning(
+        f"penny_env: numba's cache file {path} is damaged ({type(exc).__name__}: {str(exc)[:200]}); it is treated as "
+        "missing: the function compiles again and numba rewrites the entry (if this repeats, delete the file or set "
+        "NUMBA_CACHE_DIR to another folder)")
+
+
+def recompile_damaged_cache_entries() -> bool:
+    """numba's ``IndexDataCacheFile._load_index`` and ``_load_data`` wrapped once per process so that a file that
+    does not unpickle (truncated, overwritten with other bytes) is a miss with one warning naming it (module
+    docstring, 3): an index read as empty, a data file as absent (numba's ``load`` then returns None, and its
+    caller compiles). An OSError (or a MemoryError) stays numba's to handle, as before. A data file whose bytes
+    still unpickle into something else is beyond this (pickle rejects truncated and random bytes). True where the
+    repair is in place."""
+    cls = _index_file_class()
+    load_index = plain_method(cls, "_load_index", ("self",), "penny_env_damage_is_a_miss")
+    load_data = plain_method(cls, "_load_data", ("self", "name"), "penny_env_damage_is_a_miss")
+    if load_index is None or load_data is None:
+        return keep_numbas_own("numba.core.caching.IndexDataCacheFile._load_index / _load_data",
+                               "so a damaged cache file fails with numba's own error (then delete numba's cache "
+                               "folder, or set NUMBA_CACHE_DIR to another one)")
+    if getattr(load_index, "penny_env_damage_is_a_miss", False):
+        return True
+
+    def index_or_empty(self, _load=load_index):
+        try:
+            return _load(self)
+        except (OSError, MemoryError):
+            raise
+        except Exception as exc:  # noqa: BLE001 (unpickling damaged bytes raises any kind: all mean "damaged")
+            report_damaged_file(getattr(self, "_index_path", "(an index file)"), exc)
+            return {}
+
+    def data_or_none(self, name, _load=load_data):
+        try:
+            return _load(self, name)
+        except (OSError, MemoryError):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            report_damaged_file(os.path.join(str(getattr(self, "_cache_path", "")), str(name)), exc)
+            return None
+    index_or_empty.penny_env_damage_is_a_miss = data_or_none.penny_env_damage_is_a_miss = True
+    cls._load_index = index_or_empty
+    cls._load_data = data_or_none
+    return True
+
+
 def repair_numba_cache() -> None:
-    """Both repairs (module docstring), once per process."""
+    """The three repairs (module docstring), once per process."""
     lock_numba_cache_saves()
     keep_parallel_init_on_cached_loads()
+    recompile_damaged_cache_entries()

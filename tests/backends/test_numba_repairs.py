@@ -135,3 +135,61 @@ def test_a_numba_whose_internals_differ_builds_and_steps_the_compiled_envs():
     for internal in ("CompileResult._rebuild", "IndexDataCacheFile.save", "ObjectRef.close"):
         assert text.count(f"{internal}") >= 1, (internal, text)
     assert text.count("is not as penny_env's repair expects") == 3, text
+
+
+def damage(path, how):
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2] if how == "truncated" else bytes(range(256)) * 4)
+
+
+@pytest.mark.fast
+@pytest.mark.parametrize("how", ["truncated", "random"])
+def test_a_damaged_cache_file_is_a_miss_with_one_warning_naming_it(tmp_path, monkeypatch, how, fresh_reports):
+    # one truncated .nbi or .nbc made every later process fail with a bare _pickle.UnpicklingError
+    from numba.core import caching
+    load_numba()
+    assert numba_repairs.recompile_damaged_cache_entries()
+    monkeypatch.setattr(numba_repairs, "_DAMAGED", set())
+    cache_file = caching.IndexDataCacheFile(cache_path=str(tmp_path), filename_base="f", source_stamp="stamp")
+    cache_file.save(("sig", "target"), b"machine code")
+    index, data = tmp_path / "f.nbi", tmp_path / "f.1.nbc"
+    for damaged in (data, index):
+        damage(damaged, how)
+        assert cache_file.load(("sig", "target")) is None  # (a miss: numba's caller compiles)
+        assert cache_file.load(("sig", "target")) is None
+        cache_file.save(("sig", "target"), b"machine code")  # (what numba does after the compile: the entry rewritten)
+        assert cache_file.load(("sig", "target")) == b"machine code"
+    lines = [r.getMessage() for r in fresh_reports.records if "is damaged" in r.getMessage()]
+    assert len(lines) == 2 and str(data) in lines[0] and str(index) in lines[1], lines
+    assert "treated as missing" in lines[0] and "NUMBA_CACHE_DIR" in lines[0]
+
+
+CACHED_FUNCTION = '''
+import numba
+
+
+@numba.njit(cache=True)
+def twice(x):
+    return 2.0 * x
+'''
+
+
+@pytest.mark.parametrize("suffix", [".nbi", ".nbc"])
+def test_a_process_after_a_damaged_cache_file_recompiles_and_repairs_the_entry(tmp_path, suffix):
+    (tmp_path / "loops.py").write_text(CACHED_FUNCTION)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path), str(ROOT)]))
+    use = ("from penny_env.backends.interrupts import load_numba; load_numba()\n"
+           "import loops; print('result', loops.twice(21.0))")
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", use], cwd=tmp_path, env=env, capture_output=True, text=True,
+                             timeout=300)
+        return out.returncode, out.stdout + out.stderr
+    assert run()[0] == 0
+    (damaged,) = (tmp_path / "cache").rglob(f"*{suffix}")
+    damage(damaged, "truncated")
+    code, text = run()
+    assert code == 0 and "result 42.0" in text and f"cache file {damaged} is damaged" in text, text
+    code, text = run()  # (the entry was rewritten: loaded, no warning)
+    assert code == 0 and "result 42.0" in text and "damaged" not in text, text
