@@ -11,6 +11,7 @@ from __future__ import annotations
 import weakref
 
 from ..physics.law_checks import ARGUMENTS, try_law
+from .interrupts import load_numba
 from ..physics.tables.base import N_CONSTANTS
 from ..physics.tables.registered import check_formulas_on_grid, once
 
@@ -28,6 +29,7 @@ def compile_law(record) -> None:
     """numba compiles the law's update for float64 arguments, as the event loop does, and the compiled function
     passes the plain trials (law_checks.try_law: numba's math differs from Python's on domain errors,
     ``math.sqrt(-1)`` is NaN there); ValueError naming the law and numba's message otherwise."""
+    load_numba()  # (the room it needs checked, Ctrl-C held: backends/interrupts.py)
     import numba
     from numba import types
     try:
@@ -44,6 +46,7 @@ def compile_table_formulas(cls) -> None:
     """numba compiles cls.terms and cls.hess for the arguments the event loop passes (c: N_CONSTANTS float64;
     x, y: float64), each returning three numbers; ValueError naming the class and numba's message otherwise.
     The compiled copies are kept for :func:`check_compiled_formulas`."""
+    load_numba()  # (the room it needs checked, Ctrl-C held: backends/interrupts.py)
     import numba
     from numba import types
     arg = (types.UniTuple(types.float64, N_CONSTANTS), types.float64, types.float64)

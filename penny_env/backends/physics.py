@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cache, generated
-from .interrupts import compiling
+from .interrupts import compiling, load_numba
 from .builder import Builder, check_target
 
 
@@ -171,11 +171,12 @@ def build_variant(target: str, kind: int, modules, task: str = "") -> str:
 
 
 def _physics_build(target, kind, law=-1):
-    if target == "cpu":
+    if target != "python":
         try:
-            import numba  # noqa: F401
+            load_numba()  # (the room it needs checked, Ctrl-C held, numba's cache repaired: backends/interrupts.py)
         except ImportError:
             raise ImportError("the compiled backend needs numba: pip install numba") from None
+    if target == "cpu":
         from . import threads
         threads.configure()  # before any parallel loop runs: the threading layer is chosen once per process
     from ..physics import batch_loops, flows, kernels, scalar
