@@ -2,6 +2,8 @@
 preset (tests/step/example_task.py), checked when it is registered, run by the single and the vector env on every
 backend, and trainable; the built-in tasks' draws equal the numpy implementation they replaced."""
 import math
+import re
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -272,7 +274,9 @@ def test_a_target_that_leaves_the_observation_space_ends_the_episode_with_limit_
     host = env._runner.state_to_host()
     host.target[:, 0] = (1e6, -1e6)  # (what a task's target stage that slipped past its trials could draw)
     env._runner.state_from_host(host)
-    obs, _, _, trunc, info = env.step(np.zeros((2, 2), np.float32))
+    with pytest.warns(RuntimeWarning, match=r"task 'reach' drew a target off the table: the observation's target entry "
+                                            r"obs\[8\] = 5e\+06 .* outside the observation space's \[-2, 2\]"):
+        obs, _, _, trunc, info = env.step(np.zeros((2, 2), np.float32))
     _check_target_guard(obs, trunc, info, env.single_observation_space)
     single = PennyEnv("ellipse", "reach", backend=backend)
     single.reset(seed=0)
@@ -283,3 +287,36 @@ def test_a_target_that_leaves_the_observation_space_ends_the_episode_with_limit_
     with pytest.warns(RuntimeWarning, match="task_output"):
         o, _, _, tr, i = single.step(np.zeros(2, np.float32))
     assert not single.observation_space.contains(o) and i["limit"] == 8 and tr
+
+
+def _late_clock(k, st, obs, i):
+    obs[i, 10] = st.steps / 20.0  # (within (0, 1) on the trials' steps, past it from step 21 on)
+
+
+def _late_nan_reward(k, before, after, ctrl, n_arc, xp):
+    r, success = reach.reward(k, before, after, ctrl, n_arc, xp)
+    return (math.nan if after.steps > 17 else r), success
+
+
+@pytest.mark.fast
+@pytest.mark.parametrize("mode", ["NEXT_STEP", "SAME_STEP", "DISABLED"])
+def test_the_task_output_warning_names_the_cause_found_at_the_step_that_ended_the_episode(mode):
+    # the vector env warned one step after the limit, listing every possible cause (reward, target, own entries)
+    from gymnasium.vector import AutoresetMode
+    register_task(TaskRecord("late_clock", reach.ReachTask, reach.constants, reach.reward, reach.target, _late_clock,
+                             ((0.0, 1.0),)))
+    register_task(TaskRecord("late_nan", reach.ReachTask, reach.constants, _late_nan_reward, reach.target))
+    for kind, steps, cause in (
+            ("late_clock", 21, r"task 'late_clock' wrote obs\[10\] = 1\.05, outside its declared bounds extra_obs\[0\] = "
+                               r"\(0\.0, 1\.0\) \(as the float32 observation space holds them: \[0\.0, 1\.0\]\)"),
+            ("late_nan", 18, r"task 'late_nan' returned a reward that is not finite \(reported as 0\)")):
+        env = PennyVectorEnv(2, "ellipse", {"kind": kind, "tolerance": 1e-9}, backend="python",
+                             autoreset_mode=getattr(AutoresetMode, mode))
+        env.reset(seed=0)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for step in range(1, steps + 1):
+                trunc = env.step(np.zeros((2, 2), np.float32))[3]
+                assert (not caught) == (step < steps) and trunc.all() == (step == steps), (kind, step)
+        assert len(caught) == 1 and re.search(cause, str(caught[0].message)), str(caught[0].message)
+        assert "drew a target" not in str(caught[0].message)  # (the cause found, not every possible one)
