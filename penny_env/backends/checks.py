@@ -42,6 +42,22 @@ def compile_law(record) -> None:
     try_law(record.name, compiled, record.e, record.conserves_energy, "update compiled by numba")
 
 
+def recheck_law(update, runs=None) -> None:
+    """The trials of registration (law_checks.try_law) again, on what a build is about to run: ``runs``, the build's
+    compiled copy of the user's law ``update`` (numba freezes the module's globals it reads when it compiles), or
+    ``update`` itself (the plain-Python step calls it as it is now), once per registered record of it (its name, e and
+    conserves_energy). A law whose module constants were edited after register_law (an energy-conserving law made
+    lossy, say) was compiled as edited with no new check; now ValueError naming the law. Nothing for penny_env's own
+    laws (tested in the suite)."""
+    from ..physics.laws import LAW_KINDS, is_builtin_law
+    if is_builtin_law(update):
+        return
+    label = ("update as this build compiles it" if runs is not None else "update as the plain-Python step runs it") + \
+        " (its module's globals may have changed since register_law: register it again after an edit)"
+    for record in [r for r in LAW_KINDS.values() if r.update is update]:
+        try_law(record.name, update if runs is None else runs, record.e, record.conserves_energy, label)
+
+
 def compile_table_formulas(cls) -> None:
     """numba compiles cls.terms and cls.hess for the arguments the event loop passes (c: N_CONSTANTS float64;
     x, y: float64), each returning three numbers; ValueError naming the class and numba's message otherwise.

@@ -23,6 +23,7 @@ import numpy as np
 from . import cache, generated
 from .interrupts import compiling, load_numba
 from .builder import Builder, check_target
+from .checks import recheck_law
 
 
 def variant_name(kind: int) -> str:
@@ -237,6 +238,9 @@ def _physics_build(target, kind, law=-1):
     laws = build_laws(law)
     for j in laws:
         b.namespace[f"law_{j}"] = formula(COMPILED_LAWS[j])
+        # a user's law tried again as this build compiles it (a module constant edited after register_law changes
+        # what numba freezes into it); a device function is tried as the plain function it is compiled from
+        recheck_law(COMPILED_LAWS[j], b.namespace[f"law_{j}"] if target == "cpu" else None)
     b.laws = [b.namespace[f"law_{j}"] for j in laws]  # (their compiled copies, for tests)
     dispatch = generated.define("law_dispatch", law_dispatch_source(laws), {}, __name__)["law_terms"]
     b.copy(dispatch, replaces=scalar.law_terms)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import SolverSettings
+from ..backends.checks import recheck_law
 from ..backends.interrupts import load_numba
 from ..physics.faults import warn_episode_fault
 from ..physics.tables.registered import ImpactAudit, audited
@@ -93,6 +94,8 @@ class Core:
         if backend != "python":
             load_numba()  # (with Ctrl-C held: backends/interrupts.py)
         self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
+        if self.backend == "python":  # (a compiled build tries its own copy: backends/physics.py)
+            recheck_law(self.law.update)  # a user's law as it is now, not only as it was registered
         # a user's registered shape: a sample of the impacts compared with its own h (tables/registered.py)
         self.audit = ImpactAudit(self.table, self.R) if audited(self.table) else None
         self.ax, self.ay = scene.spawn_axes()
