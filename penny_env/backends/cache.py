@@ -119,10 +119,18 @@ def announce_compile(entry: str, shape: str, kind: int, dispatcher):
     verb = "compiling" if fresh else "compiling (or loading from numba's cache)"
     cost = COMPILE_COST["vector" if "vector" in entry else "other"]
     what = f"the {entry} for table {shape}"
+    if type(getattr(dispatcher, "_cache", None)).__name__ != "NullCache":
+        first, later = "the first use of a table shape after installing", ("numba caches the machine code, later runs "
+                                                                          "load it in about a second")
+    elif _CACHE_AVAILABLE and not _CACHE_AVAILABLE[0]:
+        first, later = "a build", ("numba finds no writable cache folder here, so every process compiles it again "
+                                   "(set NUMBA_CACHE_DIR to a writable folder to cache it)")
+    else:  # (a user's law, table or task: never cached, cacheable())
+        first, later = "a build", ("it runs a law, table or task from outside penny_env, which is never cached: every "
+                                   "process compiles it again")
     logging.getLogger("penny_env").warning(
-        f"penny_env: {verb} {what}: the first use of a table shape after installing takes {cost}; a line every "
-        f"{HEARTBEAT_SECONDS:g} s says it is still at it; numba caches the machine code, later runs load it in about "
-        "a second")
+        f"penny_env: {verb} {what}: {first} takes {cost}; a line every {HEARTBEAT_SECONDS:g} s says it is still at it; "
+        f"{later}")
     watch = CompileWatch(what, dispatcher, sys._getframe(1))
     watch.start()
     return watch

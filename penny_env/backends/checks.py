@@ -11,6 +11,7 @@ from __future__ import annotations
 import weakref
 
 from ..physics.law_checks import ARGUMENTS, try_law
+from .interrupts import load_numba
 from ..physics.tables.base import N_CONSTANTS
 from ..physics.tables.registered import check_formulas_on_grid, once
 
@@ -28,6 +29,7 @@ def compile_law(record) -> None:
     """numba compiles the law's update for float64 arguments, as the event loop does, and the compiled function
     passes the plain trials (law_checks.try_law: numba's math differs from Python's on domain errors,
     ``math.sqrt(-1)`` is NaN there); ValueError naming the law and numba's message otherwise."""
+    load_numba()  # (the room it needs checked, Ctrl-C held: backends/interrupts.py)
     import numba
     from numba import types
     try:
@@ -40,10 +42,27 @@ def compile_law(record) -> None:
     try_law(record.name, compiled, record.e, record.conserves_energy, "update compiled by numba")
 
 
+def recheck_law(update, runs=None) -> None:
+    """The trials of registration (law_checks.try_law) again, on what a build is about to run: ``runs``, the build's
+    compiled copy of the user's law ``update`` (numba freezes the module's globals it reads when it compiles), or
+    ``update`` itself (the plain-Python step calls it as it is now), once per registered record of it (its name, e and
+    conserves_energy). A law whose module constants were edited after register_law (an energy-conserving law made
+    lossy, say) was compiled as edited with no new check; now ValueError naming the law. Nothing for penny_env's own
+    laws (tested in the suite)."""
+    from ..physics.laws import LAW_KINDS, is_builtin_law
+    if is_builtin_law(update):
+        return
+    label = ("update as this build compiles it" if runs is not None else "update as the plain-Python step runs it") + \
+        " (its module's globals may have changed since register_law: register it again after an edit)"
+    for record in [r for r in LAW_KINDS.values() if r.update is update]:
+        try_law(record.name, update if runs is None else runs, record.e, record.conserves_energy, label)
+
+
 def compile_table_formulas(cls) -> None:
     """numba compiles cls.terms and cls.hess for the arguments the event loop passes (c: N_CONSTANTS float64;
     x, y: float64), each returning three numbers; ValueError naming the class and numba's message otherwise.
     The compiled copies are kept for :func:`check_compiled_formulas`."""
+    load_numba()  # (the room it needs checked, Ctrl-C held: backends/interrupts.py)
     import numba
     from numba import types
     arg = (types.UniTuple(types.float64, N_CONSTANTS), types.float64, types.float64)

@@ -15,6 +15,8 @@ from typing import Callable, NamedTuple
 
 import math
 
+import numpy as np
+
 from ..physics.scalar import FAULT_NONE, ImpactBuffers
 from ..step import draws, functional
 from ..step.functional import (NEXT_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots, conclude,
@@ -207,11 +209,21 @@ STEP_PASTED = (functional.clear_slots, functional.clear_row, env_step, functiona
 _ENTRY: dict = {}  # (target, variant_key(kind), task record, constants type) -> EnvEntryPoints
 
 
+def float32_bound(value) -> float:
+    """A bound as the float32 observation space holds it (Box rounds low and high to float32), as a Python float,
+    which holds it exactly."""
+    return float(np.float32(value))
+
+
 def obs_bounds_check(extra_obs):
     """``task_obs_in_bounds(obs, i)``: the task's own observation entries of row i (columns 10 on) within their
     declared bounds (a task record's extra_obs), generated with the bounds as literals (a real file:
-    backends/generated.py). NaN fails every comparison, so it is out of bounds too."""
-    terms = [f"({float(lo)!r} <= obs[i, {10 + j}] <= {float(hi)!r})" for j, (lo, hi) in enumerate(extra_obs)]
+    backends/generated.py). The literals are the bounds rounded to float32, as observation_space holds them: numba
+    compares the float32 entry with a float64 literal in float64, and the declared 0.1 is below float32(0.1), the
+    entry a task writes for 0.1, so the guard refused what the space contains; float32's own bounds are exact in
+    float64, and the guard and observation_space.contains agree bound by bound, compiled or not. NaN fails every
+    comparison, so it is out of bounds too."""
+    terms = [f"({float32_bound(lo)!r} <= obs[i, {10 + j}] <= {float32_bound(hi)!r})" for j, (lo, hi) in enumerate(extra_obs)]
     source = ("def task_obs_in_bounds(obs, i):\n    return " + " and ".join(terms) + "\n") if terms else \
         "def task_obs_in_bounds(obs, i):\n    return True\n"
     f = generated.define("task_obs_in_bounds", source, {}, __name__)["task_obs_in_bounds"]

@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from . import cache, generated
-from .interrupts import compiling
+from .interrupts import compiling, load_numba
 from .builder import Builder, check_target
+from .checks import recheck_law
 
 
 def variant_name(kind: int) -> str:
@@ -171,11 +172,12 @@ def build_variant(target: str, kind: int, modules, task: str = "") -> str:
 
 
 def _physics_build(target, kind, law=-1):
-    if target == "cpu":
+    if target != "python":
         try:
-            import numba  # noqa: F401
+            load_numba()  # (the room it needs checked, Ctrl-C held, numba's cache repaired: backends/interrupts.py)
         except ImportError:
             raise ImportError("the compiled backend needs numba: pip install numba") from None
+    if target == "cpu":
         from . import threads
         threads.configure()  # before any parallel loop runs: the threading layer is chosen once per process
     from ..physics import batch_loops, flows, kernels, scalar
@@ -236,6 +238,9 @@ def _physics_build(target, kind, law=-1):
     laws = build_laws(law)
     for j in laws:
         b.namespace[f"law_{j}"] = formula(COMPILED_LAWS[j])
+        # a user's law tried again as this build compiles it (a module constant edited after register_law changes
+        # what numba freezes into it); a device function is tried as the plain function it is compiled from
+        recheck_law(COMPILED_LAWS[j], b.namespace[f"law_{j}"] if target == "cpu" else None)
     b.laws = [b.namespace[f"law_{j}"] for j in laws]  # (their compiled copies, for tests)
     dispatch = generated.define("law_dispatch", law_dispatch_source(laws), {}, __name__)["law_terms"]
     b.copy(dispatch, replaces=scalar.law_terms)

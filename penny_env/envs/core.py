@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import SolverSettings
+from ..backends.checks import recheck_law
 from ..backends.interrupts import load_numba
 from ..physics.faults import warn_episode_fault
 from ..physics.tables.registered import ImpactAudit, audited
@@ -19,7 +20,7 @@ from ..physics.flows import end_kinematics
 from ..physics.params import MAX_ANGULAR_SPEED
 from ..physics.validation import as_state, check_inside, real_array
 
-from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT
+from ..step.functional import FAULT_OF_LIMIT, LIMIT_NAMES, LIMIT_TASK_OUTPUT, OBS_BOUND, TARGET_OBS_BOUND
 from ..step.config import ConfigError
 from ..step.draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
 from .scene import Scene, Task
@@ -93,6 +94,8 @@ class Core:
         if backend != "python":
             load_numba()  # (with Ctrl-C held: backends/interrupts.py)
         self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
+        if self.backend == "python":  # (a compiled build tries its own copy: backends/physics.py)
+            recheck_law(self.law.update)  # a user's law as it is now, not only as it was registered
         # a user's registered shape: a sample of the impacts compared with its own h (tables/registered.py)
         self.audit = ImpactAudit(self.table, self.R) if audited(self.table) else None
         self.ax, self.ay = scene.spawn_axes()
@@ -153,9 +156,11 @@ class Core:
 
     # -- spaces --------------------------------------------------------------------------
     def obs_bounds(self):
-        hi = np.ones(self.obs_dim, dtype=np.float32)
+        """(low, high) float32 of the observation space: functional.OBS_BOUND and TARGET_OBS_BOUND for the entries
+        every task has, the task's extra_obs (rounded to float32, as the step's guard compares them) for its own."""
+        hi = np.full(self.obs_dim, OBS_BOUND, dtype=np.float32)
         if not self.plane:
-            hi[8:10] = 2.0
+            hi[8:10] = TARGET_OBS_BOUND
         lo = -hi
         for j, (a, b) in enumerate(self.task_record.extra_obs):  # the task's own entries
             lo[10 + j], hi[10 + j] = a, b
@@ -275,18 +280,49 @@ class Core:
                              "can reach (no heading keeps both ends inside the table)")
 
 
-def warn_limits(core, limits) -> None:
+def task_output_cause(core, obs, dist) -> tuple:
+    """(key, words) of what the step's guard found wrong with the task's outputs (functional.conclude) in one env's
+    observation row ``obs`` and distance to its target ``dist``: a target that is not finite, a target entry or one of
+    the task's own entries outside the observation space (the first such entry, with its value and bounds), else the
+    reward, the guard's one other test (the step reports such a reward as 0). key: the kind of cause and the entry."""
+    record = core.task_record
+    if not np.isfinite(dist):
+        return ("target",), f"drew a target that is not finite (the distance to it is {float(dist)!r})"
+    lo, hi = core.obs_bounds()
+    row = np.asarray(obs, dtype=np.float32)
+    for j in range(8, min(row.shape[-1], len(lo))):
+        if not lo[j] <= row[j] <= hi[j]:  # (compared as the guard and observation_space compare: in float32)
+            if j < 10:
+                return ("entry", j), (f"drew a target off the table: the observation's target entry obs[{j}] = "
+                                      f"{float(row[j]):.6g} (the target relative to the contact point, in table sizes) "
+                                      f"is outside the observation space's [{lo[j]:g}, {hi[j]:g}]")
+            return ("entry", j), (f"wrote obs[{j}] = {str(row[j])}, outside its declared bounds extra_obs[{j - 10}] = "
+                                  f"{record.extra_obs[j - 10]} (as the float32 observation space holds them: "
+                                  f"[{float(lo[j])!r}, {float(hi[j])!r}])")
+    return ("reward",), "returned a reward that is not finite (reported as 0)"
+
+
+def warn_limits(core, limits, task_outputs=None) -> None:
     """A RuntimeWarning per kind of guarded limit among ``limits`` (info["limit"] codes of episodes that ended): the
     event loop's guard (physics/faults.py: a law or a table breaking its contract) or the task's outputs
-    (LIMIT_TASK_OUTPUT); info["limit"] names every one of them."""
+    (LIMIT_TASK_OUTPUT); info["limit"] names every one of them. task_outputs: (observation row, distance) of an env
+    that LIMIT_TASK_OUTPUT ended, whose cause the warning names (:func:`task_output_cause`), once per env object and
+    cause (a broken task in thousands of envs would otherwise print a line per episode)."""
     for code in sorted(set(int(v) for v in limits)):
         if code in FAULT_OF_LIMIT:
             warn_episode_fault(LIMIT_NAMES[code], FAULT_OF_LIMIT[code], core.law, core.table)
         elif code == LIMIT_TASK_OUTPUT:
             import warnings
             record = core.task_record
-            own = f" (declared bounds {record.extra_obs})" if record.extra_obs else ""
+            if task_outputs is None:
+                key, cause = None, ("returned a reward that is not finite, drew a target that is not or one off the "
+                                    "table, or wrote an observation entry of its own outside its extra_obs bounds")
+            else:
+                key, cause = task_output_cause(core, *task_outputs)
+            warned = core.__dict__.setdefault("_warned_task_outputs", set())
+            if key is not None and key in warned:
+                continue
+            warned.add(key)
             warnings.warn(f"penny_env: an episode ended, truncated with info['limit'] = 'task_output': task "
-                          f"{record.name!r} returned a reward that is not finite, drew a target that is not, or wrote "
-                          f"an observation entry of its own outside its extra_obs bounds{own}; fix the task's stages "
-                          "and register it again (penny_env.register_task)", RuntimeWarning, stacklevel=4)
+                          f"{record.name!r} {cause}; fix the task's stages and register it again "
+                          "(penny_env.register_task)", RuntimeWarning, stacklevel=4)

@@ -6,13 +6,13 @@ with num_envs (and max_impacts_in_info): a num_envs the machine cannot hold used
 and die in step() with a MemoryError a minute later. :func:`check_memory` compares the estimate of
 :func:`vector_env_bytes` (the env's own arrays, counted from their shapes and dtypes below; checked
 against tracemalloc's measure in tests/envs/test_limits.py) with the memory this process may still allocate
-(envs/memory.py: MemAvailable, ulimit -v and the cgroup's limit).
+(backends/memory.py: MemAvailable, ulimit -v and the cgroup's limit).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .memory import memory_left
+from ..backends.memory import memory_left
 
 INT64_MAX = int(np.iinfo(np.int64).max)
 
@@ -26,7 +26,7 @@ def check_int64(name: str, value) -> int:
 
 def available_memory() -> int | None:
     """Bytes this process may still allocate: the least of MemAvailable, the address-space limit (ulimit -v) and
-    the cgroup's memory limit (envs/memory.py), or None (unknown: nothing is refused)."""
+    the cgroup's memory limit (backends/memory.py), or None (unknown: nothing is refused)."""
     return memory_left()[0]
 
 

@@ -321,7 +321,7 @@ class PennyEnv(gym.Env):
             if self.render_mode == "human":
                 self.render()
         if limit >= LIMIT_LAW_NONFINITE and limit != LIMIT_ACTION:  # a guard ended the episode (core.warn_limits)
-            warn_limits(c, (limit,))
+            warn_limits(c, (limit,), (obs[0], d))
         return obs[0], float(reward), terminated, truncated, info
 
     def _info(self, n_imp, times, ends, energy, success, limit=0):

@@ -92,7 +92,8 @@ class Scene:
                   penny inside), ranges [low, high] of theta, phi, theta_dot, phi_dot
     obs_scale:    {theta_dot, phi_dot} [rad/s]: velocities are observed as tanh(v / scale)
     arena:        half-size [m] of the spawn and target region on the open plane, and the length
-                  scale of its observations (ignored with walls)
+                  scale of its observations and rewards (ignored with walls); more than R, and more
+                  than the task's tolerance
     """
 
     table: dict = field(default_factory=lambda: {"kind": "ellipse", "a": 0.15, "b": 0.2})
@@ -180,8 +181,14 @@ class Scene:
             if out["spawn_fraction"] > fmax:
                 raise ConfigError(f"{o}.init.spawn_fraction must be <= 1 - R / inradius = {fmax:.6g} "
                                   f"(so the penny starts inside), got {out['spawn_fraction']!r}")
-        elif out["spawn_fraction"] > 1.0:
-            raise ConfigError(f"{o}.init.spawn_fraction must be <= 1 on the open plane, got {out['spawn_fraction']!r}")
+        else:
+            # the plane's arena is its length scale (the reward's progress term is divided by it) and its table: one
+            # below the penny, as a table whose inradius is, is no region for it (1e-9 m paid -5.7e6 at the first step)
+            if not self.arena > R:
+                raise ConfigError(f"{o}.arena = {self.arena!r} m is too small for the penny: the open plane's spawn and "
+                                  f"target region must exceed its radius R = {R:.4g} m")
+            if out["spawn_fraction"] > 1.0:
+                raise ConfigError(f"{o}.init.spawn_fraction must be <= 1 on the open plane, got {out['spawn_fraction']!r}")
 
     # derived objects ---------------------------------------------------------------------
     def step_speed_limits(self) -> tuple[float, float]:

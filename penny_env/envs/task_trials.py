@@ -4,7 +4,8 @@ writes where it must not, is refused with a message naming the task and the stag
 inside an environment's build or, worse, running with NaN rewards.
 
 * ``constants(scene, task, L)`` builds a NamedTuple of plain numbers (an exception is reported as the stage's);
-* ``target`` returns four finite numbers (tx, ty, cos b, sin b) on fresh episodes;
+* ``target`` returns four finite numbers (tx, ty, cos b, sin b) on fresh episodes, a target on the table (the
+  observation's target entries within the observation space);
 * ``reward`` returns (reward, success): a finite real number that fits a float64 (not an array, not a tuple of
   three) and a bool-like success;
 * ``observation`` writes only its own entries (columns 10 to obs_dim - 1) of its own row, finite and within
@@ -12,8 +13,9 @@ inside an environment's build or, worse, running with NaN rewards.
   named; an index past the row raises and is reported as such;
 * ``marked_arc`` returns three finite numbers.
 
-A trial cannot prove a stage right everywhere: at run time, the step ends an episode whose reward is not finite
-or whose observation leaves its declared bounds (info["limit"] "task_output", step/functional.py), with a
+A trial cannot prove a stage right everywhere: at run time, the step ends an episode whose reward is not finite,
+whose target leaves the table (the observation's target entries outside the space) or whose own observation entries
+leave their declared bounds (info["limit"] "task_output", step/functional.py), with a
 warning naming the task.
 """
 from __future__ import annotations
@@ -26,7 +28,7 @@ from ..physics.kernels import SCALAR
 from ..physics.numbers import is_real
 from ..physics.scalar import scalar_model
 from ..step.draws import draw_stream, draw_uniform
-from ..step.functional import PennyState, angle_trig, distance, env_params
+from ..step.functional import PennyState, angle_trig, distance, env_params, observation
 from ..step.tasks.base import check_constants
 
 TRIALS = 16  # episodes (start states, targets) each stage is tried on
@@ -92,6 +94,12 @@ def trial_task(record) -> None:
         tx, ty, cb, sb = _numbers(record, "target", _call(record, "target", record.target, k, p, m, s, trig, base, SCALAR),
                                   4, "tx, ty, cos b, sin b")
         before = PennyState(s, trig, (tx, ty), (cb, sb), 0, distance(s, (tx, ty)), episode, 0.05 * episode)
+        seen = np.float32(observation(before, p)[8:10])  # (as the float32 observation holds them)
+        if not ((seen >= lo[8:10]) & (seen <= hi[8:10])).all():
+            raise ValueError(f"{_owner(record, 'target')} returned the target ({tx:.6g}, {ty:.6g}) m, which puts the "
+                             f"observation's target entries obs[8:10] = {seen.tolist()} (the target relative to the "
+                             f"contact point, in table sizes) outside the observation space's [{lo[8]:g}, {hi[8]:g}]: a "
+                             "target must lie on the table")
         s1 = (s[0] + 1e-3, s[1] - 1e-3, s[2] + 0.1, s[3] + 0.05, s[4], s[5])
         after = PennyState(s1, angle_trig(s1), (tx, ty), (cb, sb), episode % 2, distance(s1, (tx, ty)), episode + 1,
                            0.05 * (episode + 1))

@@ -16,7 +16,7 @@ from ..backends.packing import pack
 from ..backends.runner import CpuRunner, new_state
 from ..physics.scalar import scalar_model
 from .core import Core, check_seed, render_fps, seed_keys, warn_limits, X, Y
-from ..step.functional import DISABLED, LIMIT_LAW_NONFINITE, NEXT_STEP, SAME_STEP, env_params
+from ..step.functional import DISABLED, LIMIT_LAW_NONFINITE, LIMIT_TASK_OUTPUT, NEXT_STEP, SAME_STEP, env_params
 from .limits import check_int64, check_memory, vector_env_bytes
 from .scene import resolve
 
@@ -173,7 +173,6 @@ class PennyVectorEnv(VectorEnv):
         self._started = False    # a first reset has drawn every env's episode
         self._renderers = None
         self._in_step = False
-        self._limits = None  # the last step's info["limit"] (host outputs): guard faults are warned as the envs reset
 
     def __getstate__(self):
         state = self.__dict__.copy()
@@ -277,9 +276,6 @@ class PennyVectorEnv(VectorEnv):
                     raise ResetNeeded("the first reset must reset every env")
                 if self._in_step and not mask.all():
                     raise ResetNeeded("the previous step or reset was interrupted: reset every env (no reset_mask)")
-        if self._limits is not None and self.autoreset_mode == AutoresetMode.DISABLED:
-            warn_limits(self._core, np.unique(self._limits[mask]))  # guard faults of the episodes this reset ends
-        self._limits = None
         # from here on the envs change: guarded as a step is (the flag is cleared once every row is whole)
         self._in_step = True
         super().reset(seed=seed if int_seed else None)
@@ -317,8 +313,6 @@ class PennyVectorEnv(VectorEnv):
                               "as KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         runner = self._runner
         runner.load_actions(actions)  # checked before anything changes (TypeError / ValueError naming the sub-env)
-        if self._limits is not None and self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._warn_faults(self._limits)  # the guard faults of the episodes this step resets
         # from here to the end of the runner's step the bookkeeping must run whole (class docstring)
         self._in_step = True
         try:
@@ -333,26 +327,31 @@ class PennyVectorEnv(VectorEnv):
         self._extend_trails()
         info = self._info(out)
         if runner.outputs == "numpy":
-            self._limits = res.limit
+            self._warn_faults(res)
             if self.autoreset_mode == AutoresetMode.SAME_STEP and res.ended.any():
-                self._warn_faults(res.limit[res.ended])
                 info.update(self._final_entries(res.final_obs.copy(), res.ended.copy(), res.terminated))
         elif self.autoreset_mode == AutoresetMode.SAME_STEP:  # (device outputs: which envs ended is not read here)
             info.update(self._final_entries(res.final_obs, res.ended, res.terminated))
         return res.obs, res.reward, res.terminated, res.truncated, info
 
-    def _warn_faults(self, limits):
-        """A warning for the episodes that a guard ended (the event loop's, physics/faults.py, or the task's outputs':
-        core.warn_limits), one per kind, as those envs reset (NEXT_STEP: the next step; SAME_STEP: this step;
-        DISABLED: the reset); info["limit"] names every one of them. (Device outputs leave it to info["limit"]: a
-        warning would need the host to read the limits each step.)"""
+    def _warn_faults(self, res):
+        """A warning for the episodes that a guard ended at this step (the event loop's, physics/faults.py, or the
+        task's outputs', with the cause found in the first such env's observation: core.warn_limits), one per kind,
+        at the step whose info["limit"] says so, in every autoreset mode; info["limit"] names every one of them.
+        (Device outputs leave it to info["limit"]: a warning would need the host to read the limits each step.)"""
+        limits = res.limit
         if not limits.size:
             return
         # the usual case, no fault, in one pass (a numpy reduction costs about 1 us at any size; a few envs' bytes
         # are scanned faster by Python's max over the bytes)
         if (max(limits.tobytes()) if limits.size <= 64 else limits.max()) < LIMIT_LAW_NONFINITE:
             return
-        warn_limits(self._core, np.unique(limits[limits >= LIMIT_LAW_NONFINITE]))
+        task = np.flatnonzero(limits == LIMIT_TASK_OUTPUT)
+        outputs = None
+        if task.size:  # (SAME_STEP: the ended episode's last observation is final_obs; obs is the new episode's)
+            i = task[0]
+            outputs = (res.final_obs[i] if self.autoreset_mode == AutoresetMode.SAME_STEP else res.obs[i], res.dist[i])
+        warn_limits(self._core, np.unique(limits[limits >= LIMIT_LAW_NONFINITE]), outputs)
 
     def _info(self, out) -> dict:
         """The info of a step or a reset, from the runner's outputs in their own array type (numpy, torch or numba

@@ -51,6 +51,12 @@ LIMIT_LAW_NONFINITE, LIMIT_LAW_ENERGY, LIMIT_OUTSIDE_WALL, LIMIT_ACTION, LIMIT_L
 LIMIT_TASK_OUTPUT = 8  # the task's reward, target or own observation entries not finite or out of bounds (conclude)
 LIMIT_NAMES = ("", "speed", "impacts", "law_nonfinite", "law_energy", "outside_wall", "action", "law_outward",
                "task_output")
+# the observation space's bounds of the entries every task has (Core.obs_bounds builds the Box from them): 0 to 7
+# (positions in table sizes; cos, sin and tanh) within [-1, 1]; 8 and 9, the target relative to the contact point in
+# table sizes, within [-2, 2] on a table (both points on it), tanh'd into [-1, 1] on the open plane. The step's guard
+# (conclude) holds the task's target to them: a target off the table ends the episode (LIMIT_TASK_OUTPUT)
+OBS_BOUND = 1.0
+TARGET_OBS_BOUND = 2.0
 FAULT_OF_LIMIT = {LIMIT_LAW_NONFINITE: FAULT_NONFINITE, LIMIT_LAW_ENERGY: FAULT_ENERGY, LIMIT_OUTSIDE_WALL: FAULT_OUTSIDE,
                   LIMIT_LAW_OUTWARD: FAULT_OUTWARD}
 # the vector env's autoreset (gymnasium.vector.AutoresetMode), as EnvParams.autoreset
@@ -328,14 +334,19 @@ def write_observation(obs, i, st, p, k):
 def conclude(st, s1, elapsed, limit, ctrl, n_arc, p, k, obs, i):
     """The stages after the transition from PennyState st to state s1: reward, observation (into row i of obs)
     and termination, the task's outputs guarded: a reward that is not finite (returned as 0), a target that is
-    not (the distance), or an observation entry of the task's own outside its extra_obs bounds
+    not (the distance) or that puts the observation's target entries (8, 9) outside the observation space (a
+    target off the table), or an observation entry of the task's own outside its extra_obs bounds
     (task_obs_in_bounds, generated from the task's record by backends/env.py) ends the episode, truncated, with
-    LIMIT_TASK_OUTPUT. Returns (new PennyState, reward, terminated, truncated, kinetic energy, limit)."""
+    LIMIT_TASK_OUTPUT. The entries are compared as the float32 values the observation holds, with bounds that
+    float32 holds exactly: the guard and observation_space.contains agree bound by bound on every target.
+    Returns (new PennyState, reward, terminated, truncated, kinetic energy, limit)."""
     new = PennyState(s1, angle_trig(s1), st.target, st.arc, st.count + n_arc, distance(s1, st.target), st.steps + 1,
                      st.time + elapsed)
     r, success = task_reward(k, st, new, ctrl, n_arc, XP)  # noqa: F821
     write_observation(obs, i, new, p, k)
-    if not (math.isfinite(r) and math.isfinite(new.dist) and task_obs_in_bounds(obs, i)):  # noqa: F821
+    bound = OBS_BOUND if p.plane else TARGET_OBS_BOUND
+    target_seen = -bound <= obs[i, 8] <= bound and -bound <= obs[i, 9] <= bound  # (False for NaN)
+    if not (math.isfinite(r) and math.isfinite(new.dist) and target_seen and task_obs_in_bounds(obs, i)):  # noqa: F821
         # the task's outputs guarded (a user's task that slipped past its registration trials): the episode ends
         r = 0.0 if not math.isfinite(r) else r
         limit = LIMIT_TASK_OUTPUT

@@ -27,6 +27,23 @@ def test_the_compile_notice_is_one_line_once_and_only_when_numba_compiles(caplog
     assert len(lines) == 1 and lines[0].startswith("penny_env: compiling the test entry for table Shape")
 
 
+@pytest.mark.parametrize("writable, says", [
+    (False, r"numba finds no writable cache folder here, so every process compiles it again \(set NUMBA_CACHE_DIR"),
+    (True, r"it runs a law, table or task from outside penny_env, which is never cached: every process compiles it")])
+def test_the_compile_notice_promises_a_cached_load_only_where_numba_caches(caplog, monkeypatch, writable, says):
+    # with no writable cache folder the line still said "numba caches the machine code, later runs load it in about a
+    # second", and every process compiled again
+    from penny_env.backends import cache as compiled
+    monkeypatch.setattr(compiled, "_CACHE_AVAILABLE", [writable])
+    monkeypatch.setattr(compiled, "_ANNOUNCED", set())
+    with caplog.at_level(logging.WARNING, logger="penny_env"):
+        compiled.announce_compile("uncached entry", "Shape", 95, numba.njit(lambda x: x))  # (caching off)
+        compiled.announce_compile("cached entry", "Shape", 95, numba.njit(cache=True)(compiled._probe))
+    (uncached, cached) = [r.getMessage() for r in caplog.records if r.name == "penny_env"]
+    assert re.search(says, uncached) and "later runs load it" not in uncached, uncached
+    assert "numba caches the machine code, later runs load it in about a second" in cached, cached
+
+
 def test_no_notice_when_the_machine_code_is_cached(caplog, tmp_path, monkeypatch):
     from penny_env.backends import cache as compiled
 

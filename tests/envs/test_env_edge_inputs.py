@@ -34,6 +34,20 @@ def test_arena_beyond_its_range_is_refused(arena):
         PennyVectorEnv(2, "plane", "reach", arena=arena)
 
 
+@pytest.mark.parametrize("arena, match", [
+    (1e-9, r"scene\.arena = 1e-09 m is too small for the penny: .* exceed its radius R = 0\.01 m"),
+    (0.01, r"scene\.arena = 0\.01 m is too small for the penny"),
+    (0.012, r"task\.tolerance = 0\.015 m must be below scene\.arena \(the open plane's length scale\) = 0\.012 m")])
+def test_an_arena_below_the_penny_or_the_tolerance_is_refused_naming_the_field(arena, match):
+    # a plane arena of 1e-9 m was accepted and its first step paid -5.7e6 (the reward's length scale is the arena)
+    with pytest.raises(ConfigError, match=match):
+        gym.make("PennyReach-Plane-v0", backend="python", arena=arena)
+    with pytest.raises(ConfigError, match=match):
+        PennyVectorEnv(2, "plane", "reach", arena=arena, backend="python")
+    with pytest.raises(ConfigError, match=r"task\.tolerance = 0\.5 m must be below the table's size = 0\.15 m"):
+        PennyEnv("circle", {"kind": "reach", "tolerance": 0.5}, backend="python")
+
+
 def test_largest_arena_gives_finite_rewards():
     for env in (PennyEnv("plane", "reach", arena=1e100), PennyVectorEnv(2, "plane", "reach", arena=1e100)):
         env.reset(seed=0)

@@ -7,6 +7,7 @@ raise ResetNeeded until a reset: the process survives, nothing non-finite comes 
 steps bitwise as a fresh one."""
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -92,3 +93,79 @@ def test_llvmlite_close_is_guarded_and_a_sigint_in_it_comes_right_after(python_s
                        text=True, timeout=600, env=env, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "guarded True" in r.stdout and "KeyboardInterrupt after close True" in r.stdout, r.stdout + r.stderr[-3000:]
+
+
+def _busy_until(deadline):
+    """Python code that runs until ``deadline`` (a block stuck in Python, as numba's import was)."""
+    import time
+    while time.monotonic() < deadline:
+        sum(range(1000))
+
+
+def test_a_held_ctrl_c_is_raised_inside_a_block_stuck_past_the_hold_limit(monkeypatch, python_sigint_handler):
+    # numba's import under a small ulimit -v spun forever with SIGINT held: Ctrl-C was swallowed
+    import signal
+    import time
+
+    from penny_env.backends import interrupts
+    monkeypatch.setattr(interrupts, "HOLD_LIMIT_S", 0.3, raising=False)
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts.compiling(collect=False):
+            os.kill(os.getpid(), signal.SIGINT)
+            _busy_until(start + 20.0)
+    assert time.monotonic() - start < 10.0  # (raised about 0.3 s after the Ctrl-C, inside the block)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # a block that ends in time raises the held Ctrl-C once, after it, and nothing comes later
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts.compiling(collect=False):
+            os.kill(os.getpid(), signal.SIGINT)
+            sum(range(10000))
+    _busy_until(time.monotonic() + 1.0)
+    # nested blocks: the outer one holds, and its limit counts (a stuck inner block does not hold it again)
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts.compiling(collect=False):
+            with interrupts.compiling(collect=False):
+                os.kill(os.getpid(), signal.SIGINT)
+                _busy_until(start + 20.0)
+    assert time.monotonic() - start < 10.0
+
+
+UNDER_A_SMALL_ADDRESS_SPACE_LIMIT = """
+    import resource
+    import penny_env as pe
+    mapped = int([ln for ln in open("/proc/self/status") if ln.startswith("VmSize:")][0].split()[1]) * 1024
+    resource.setrlimit(resource.RLIMIT_AS, (mapped + (150 << 20), resource.getrlimit(resource.RLIMIT_AS)[1]))
+    try:
+        pe.PennyEnv("ellipse", "reach", backend="numba")
+    except MemoryError as exc:
+        print("MemoryError:", exc)
+"""
+
+
+def test_too_small_an_address_space_limit_for_numba_is_refused_naming_it():
+    # under ulimit -v 400000 the build spun forever in numba's import (OpenBLAS's start); at 450000 a bare
+    # MemoryError, at 300000 "Could not find/load shared object file 'libllvmlite.so'"
+    pytest.importorskip("numba")
+    import textwrap
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", textwrap.dedent(UNDER_A_SMALL_ADDRESS_SPACE_LIMIT)], capture_output=True,
+                       text=True, timeout=120, env=env, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert re.search(r"MemoryError: penny_env: the address-space limit \(RLIMIT_AS, ulimit -v \d+ KiB\) leaves this "
+                     r"process 1[45]\d MiB, less than the \d+ MiB the compiled backend needs .* or use "
+                     r"backend='python'", r.stdout), r.stdout + r.stderr[-3000:]
+
+
+@pytest.mark.fast
+def test_the_compiler_room_is_checked_against_the_address_space_limit_only(monkeypatch):
+    from penny_env.backends import interrupts
+    monkeypatch.setattr(interrupts, "address_space_left", lambda: None)
+    interrupts.check_compiler_room()  # (no limit: nothing refused)
+    monkeypatch.setattr(interrupts, "address_space_left", lambda: interrupts.COMPILER_ROOM)
+    interrupts.check_compiler_room()
+    monkeypatch.setattr(interrupts, "address_space_left", lambda: interrupts.COMPILER_ROOM - 1)
+    monkeypatch.setattr(interrupts, "address_space_limit", lambda: 400000 * 1024)
+    with pytest.raises(MemoryError, match=r"ulimit -v 400000 KiB\) leaves this process \d+ MiB"):
+        interrupts.check_compiler_room()

@@ -96,7 +96,7 @@ def _fake_machine(root, meminfo_kib, cgroup=None, v1=None, vmsize_kib=None):
 
 def test_the_memory_left_reads_the_cgroup_limits_too(tmp_path):
     # MemAvailable 64 GiB, but the job's cgroup allows 2 GiB with 0.5 GiB used: 1.5 GiB left
-    from penny_env.envs.memory import memory_left
+    from penny_env.backends.memory import memory_left
     gib = 2 ** 30
     _fake_machine(tmp_path / "v2", 64 * 2 ** 20, cgroup=(2 * gib, gib // 2))
     assert memory_left(tmp_path / "v2") == (3 * gib // 2, "the cgroup's memory limit")
@@ -109,7 +109,7 @@ def test_the_memory_left_reads_the_cgroup_limits_too(tmp_path):
 def test_the_memory_left_reads_the_address_space_limit(tmp_path, monkeypatch):
     # ulimit -v 4 GiB with 1 GiB mapped: 3 GiB left, though MemAvailable says 64 GiB
     resource = pytest.importorskip("resource", reason="RLIMIT_AS is POSIX")
-    from penny_env.envs.memory import memory_left
+    from penny_env.backends.memory import memory_left
     gib = 2 ** 30
     _fake_machine(tmp_path, 64 * 2 ** 20, vmsize_kib=2 ** 20)
     monkeypatch.setattr(resource, "getrlimit", lambda which: (4 * gib, resource.RLIM_INFINITY))

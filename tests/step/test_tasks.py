@@ -2,6 +2,8 @@
 preset (tests/step/example_task.py), checked when it is registered, run by the single and the vector env on every
 backend, and trainable; the built-in tasks' draws equal the numpy implementation they replaced."""
 import math
+import re
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -192,3 +194,129 @@ def test_draws_are_the_same_bits_compiled_and_at_extreme_keys():
         obs = [e.reset(seed=seed)[0] for e in envs]
         assert np.array_equal(*obs) and np.array_equal(envs[0].states, envs[1].states)
     assert seed_keys([2**64 - 1]).dtype == np.uint64
+
+
+# bounds at which float32 and float64 part: 0.1 and 1/3 are not float32 numbers (float32(0.1) > 0.1, float32(1/3) <
+# 1/3), 1.5 is; 1e-40 is a float32 subnormal; 3e38 lies near the top of float32's range
+GUARD_BOUNDS = ((0.0, 0.1), (-0.1, 1 / 3), (-1.5, 1.5), (-1e-40, 1e-40), (-3e38, 3e38), (0.7, 0.70000001))
+
+
+def _float32_neighbours(v):
+    """The float32 entries around bound v: its own float32, one step down and one up, and v's float64 itself."""
+    f = np.float32(v)
+    return [np.nextafter(f, np.float32(-np.inf)), f, np.nextafter(f, np.float32(np.inf)), np.float32(np.float64(v))]
+
+
+@needs_numba
+@pytest.mark.fast
+def test_the_generated_task_output_guard_agrees_with_the_observation_space_bound_by_bound():
+    # the compiled guard compared the float32 entry float32(0.1) = 0.10000000149 with the float64 literal 0.1 and ended
+    # every numba episode of a task that writes its declared bound 0.1 (limit 8), which observation_space contains
+    import numba
+    from gymnasium import spaces
+
+    from penny_env.backends.env import obs_bounds_check
+    guard = obs_bounds_check(GUARD_BOUNDS)
+    compiled = numba.njit(cache=False)(guard)
+    lo = np.array([-1.0] * 10 + [b[0] for b in GUARD_BOUNDS], np.float32)
+    hi = np.array([1.0] * 10 + [b[1] for b in GUARD_BOUNDS], np.float32)
+    space = spaces.Box(lo, hi, dtype=np.float32)
+    obs = np.zeros((1, len(lo)), np.float32)
+    obs[0, 10:] = (lo[10:] + hi[10:]) / 2  # (every entry inside; each case below moves one)
+    checked = 0
+    for j, (a, b) in enumerate(GUARD_BOUNDS):
+        for v in _float32_neighbours(a) + _float32_neighbours(b) + [np.float32(np.nan)]:
+            row = obs.copy()
+            row[0, 10 + j] = v
+            inside = bool(space.contains(row[0]))
+            assert bool(guard(row, 0)) is inside and bool(compiled(row, 0)) is inside, (j, float(v), inside)
+            checked += inside
+    assert checked >= 4 * len(GUARD_BOUNDS)  # (both bounds of every entry accepted: the comparisons are not all False)
+
+
+@pytest.mark.fast
+def test_extra_obs_bounds_beyond_float32_are_refused_naming_the_entry():
+    @dataclass(frozen=True)
+    class Cfg(Task):
+        kind: str = "t10"
+
+    with pytest.raises(ValueError, match=r"extra_obs\[1\] = \(0\.0, 1e\+39\) must be within the float32 range"):
+        register_task(TaskRecord("t10", Cfg, lambda s, t, L: _K(1.0), _stage, reach.target, lambda k, st, obs, i: None,
+                                 ((0.0, 1.0), (0.0, 1e39))))
+    assert "t10" not in TASKS
+
+
+def _far_target(k, p, m, s, trig, base, xp):
+    return 1e6, -1e6, 1.0, 0.0
+
+
+@pytest.mark.fast
+def test_a_target_off_the_table_is_refused_when_the_task_is_registered():
+    # it passed register_task, and the observations then left observation_space (5e6 where it says [-2, 2]), limit 0
+    with pytest.raises(ValueError, match=r"register_task\('far'\): target returned the target \(1e\+06, -1e\+06\) m, "
+                                         r"which puts the observation's target entries obs\[8:10\].*outside the "
+                                         r"observation space's \[-2, 2\]"):
+        register_task(TaskRecord("far", reach.ReachTask, reach.constants, reach.reward, _far_target))
+    assert "far" not in TASKS
+
+
+def _check_target_guard(obs, trunc, info, space):
+    assert trunc[0] and info["limit"][0] == 8 and not space.contains(obs[0])
+    assert not trunc[1] and info["limit"][1] == 0 and space.contains(obs[1])
+
+
+@pytest.mark.parametrize("backend", ["python", pytest.param("numba", marks=needs_numba)])
+def test_a_target_that_leaves_the_observation_space_ends_the_episode_with_limit_task_output(backend):
+    # the run-time guard checked the target's finiteness only: a target off the table gave observations outside
+    # observation_space with limit 0 and no warning, on every backend
+    env = PennyVectorEnv(2, "ellipse", "reach", backend=backend)
+    env.reset(seed=0)
+    host = env._runner.state_to_host()
+    host.target[:, 0] = (1e6, -1e6)  # (what a task's target stage that slipped past its trials could draw)
+    env._runner.state_from_host(host)
+    with pytest.warns(RuntimeWarning, match=r"task 'reach' drew a target off the table: the observation's target entry "
+                                            r"obs\[8\] = 5e\+06 .* outside the observation space's \[-2, 2\]"):
+        obs, _, _, trunc, info = env.step(np.zeros((2, 2), np.float32))
+    _check_target_guard(obs, trunc, info, env.single_observation_space)
+    single = PennyEnv("ellipse", "reach", backend=backend)
+    single.reset(seed=0)
+    single._target = (0.0, 0.399)  # (2 table sizes from the centre: obs[8] near 2, inside the space; then past it)
+    o, _, _, tr, i = single.step(np.zeros(2, np.float32))
+    assert single.observation_space.contains(o) and i["limit"] == 0 and not tr
+    single._target = (0.0, 0.5)
+    with pytest.warns(RuntimeWarning, match="task_output"):
+        o, _, _, tr, i = single.step(np.zeros(2, np.float32))
+    assert not single.observation_space.contains(o) and i["limit"] == 8 and tr
+
+
+def _late_clock(k, st, obs, i):
+    obs[i, 10] = st.steps / 20.0  # (within (0, 1) on the trials' steps, past it from step 21 on)
+
+
+def _late_nan_reward(k, before, after, ctrl, n_arc, xp):
+    r, success = reach.reward(k, before, after, ctrl, n_arc, xp)
+    return (math.nan if after.steps > 17 else r), success
+
+
+@pytest.mark.fast
+@pytest.mark.parametrize("mode", ["NEXT_STEP", "SAME_STEP", "DISABLED"])
+def test_the_task_output_warning_names_the_cause_found_at_the_step_that_ended_the_episode(mode):
+    # the vector env warned one step after the limit, listing every possible cause (reward, target, own entries)
+    from gymnasium.vector import AutoresetMode
+    register_task(TaskRecord("late_clock", reach.ReachTask, reach.constants, reach.reward, reach.target, _late_clock,
+                             ((0.0, 1.0),)))
+    register_task(TaskRecord("late_nan", reach.ReachTask, reach.constants, _late_nan_reward, reach.target))
+    for kind, steps, cause in (
+            ("late_clock", 21, r"task 'late_clock' wrote obs\[10\] = 1\.05, outside its declared bounds extra_obs\[0\] = "
+                               r"\(0\.0, 1\.0\) \(as the float32 observation space holds them: \[0\.0, 1\.0\]\)"),
+            ("late_nan", 18, r"task 'late_nan' returned a reward that is not finite \(reported as 0\)")):
+        env = PennyVectorEnv(2, "ellipse", {"kind": kind, "tolerance": 1e-9}, backend="python",
+                             autoreset_mode=getattr(AutoresetMode, mode))
+        env.reset(seed=0)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for step in range(1, steps + 1):
+                trunc = env.step(np.zeros((2, 2), np.float32))[3]
+                assert (not caught) == (step < steps) and trunc.all() == (step == steps), (kind, step)
+        assert len(caught) == 1 and re.search(cause, str(caught[0].message)), str(caught[0].message)
+        assert "drew a target" not in str(caught[0].message)  # (the cause found, not every possible one)

@@ -82,6 +82,7 @@ class TaskRecord:
 
 
 TASKS: dict = {}  # name -> TaskRecord
+FLOAT32_MAX = 3.4028234663852886e38  # the largest finite float32: the observations' dtype
 
 _SIGNATURES = {"constants": ("scene", "task", "L"), "reward": ("k", "before", "after", "ctrl", "n_arc", "xp"),
                "target": ("k", "p", "m", "s", "trig", "base", "xp"), "observation": ("k", "st", "obs", "i"),
@@ -135,6 +136,9 @@ def check_task(record: TaskRecord) -> None:
                 or not all(math.isfinite(v) for v in pair) or not pair[0] < pair[1]):
             raise ValueError(f"register_task({record.name!r}): extra_obs[{j}] must be a (low, high) pair of finite "
                              f"numbers with low < high, got {pair!r}")
+        if not all(abs(v) <= FLOAT32_MAX for v in pair):  # (observation_space's float32 would hold it as inf)
+            raise ValueError(f"register_task({record.name!r}): extra_obs[{j}] = {pair!r} must be within the float32 "
+                             f"range of the observation, |bound| <= {FLOAT32_MAX:.8g}")
     if bool(record.extra_obs) != (record.observation is not None):
         raise ValueError(f"register_task({record.name!r}): observation writes the extra_obs entries: give both or neither")
     try:

@@ -59,6 +59,11 @@ def reachable_fraction(scene) -> float:
 
 
 def constants(scene, task, L) -> ReachConstants:
+    if not task.tolerance < L:
+        # a success radius as large as the region itself: most episodes succeed at their first step
+        field = "scene.arena (the open plane's length scale)" if scene.make_table() is None else "the table's size"
+        raise ConfigError(f"task.tolerance = {task.tolerance!r} m must be below {field} = {L!r} m; lower the "
+                          "tolerance or enlarge the region")
     scale = task.target_fraction * reachable_fraction(scene)
     ax, ay = scene.spawn_axes()
     if task.heading_offset > 0 and not task.heading_offset < scale * min(ax, ay):

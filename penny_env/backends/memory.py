@@ -10,7 +10,8 @@ PennyVectorEnv of 5e6 envs fits, and numpy's MemoryError came 137 s later).
   every cgroup above it.
 
 A source that cannot be read (another OS, no cgroup mounted, "max") sets no bound. ``root`` lets the tests stand
-up a fake /proc and /sys.
+up a fake /proc and /sys. The envs read it for their arrays (envs/limits.py), the backends for numba's import and
+compiles (interrupts.check_compiler_room), so it lives with the backends, the lower layer.
 """
 from __future__ import annotations
 
@@ -51,14 +52,20 @@ def machine_available(root: Path) -> int | None:
         return None
 
 
-def address_space_left(root: Path) -> int | None:
-    """RLIMIT_AS's soft limit less the process's mapped size (VmSize), or None without a limit."""
+def address_space_limit() -> int | None:
+    """RLIMIT_AS's soft limit (bytes), or None without one."""
     try:
         import resource
         soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     except (ImportError, AttributeError, OSError, ValueError):
         return None
-    if soft == resource.RLIM_INFINITY or soft < 0:
+    return None if soft == resource.RLIM_INFINITY or soft < 0 else soft
+
+
+def address_space_left(root: Path = Path("/")) -> int | None:
+    """RLIMIT_AS's soft limit less the process's mapped size (VmSize), or None without a limit."""
+    soft = address_space_limit()
+    if soft is None:
         return None
     mapped = 0
     try:
