@@ -99,6 +99,7 @@ class Args:
     std_max: float = 2.0
     norm_coef: float = 0.1  # pulls the heading 2-vector's length to 1 (its angle's gradient stays bounded)
     heading_init: float = 0.01  # the heading 2-vector's output weights' scale at the start
+    shaping: bool = True  # the potential-based shaping (agent_side.potential); off: the fair reward alone
     v_flat: float = 0.5  # park potential: speeds under this x speed_tolerance count as 0
     desync: bool = True
     val_every: int = 5_000_000  # env steps between validation evaluations (0: none)
@@ -313,7 +314,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
 
     if guide is not None:
         start_guided(np.arange(N))
-    phi = A.potential(obs, k, args.v_flat)
+    phi = A.potential(obs, k, args.v_flat) if args.shaping else torch.zeros(N)
     checkpoints = sorted(int(c) for c in checkpoints)
     passed = {c for c in checkpoints if c <= state["global_step"]}  # (a resumed run: evaluated before it stopped)
     called_at = set()
@@ -354,7 +355,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
                     term_t = torch.as_tensor(term, dtype=torch.float32)
                     done = np.asarray(term, bool) | np.asarray(trunc, bool)
                     done_t = torch.as_tensor(done, dtype=torch.float32)
-                    phi_next = A.potential(nobs, k, args.v_flat)
+                    phi_next = A.potential(nobs, k, args.v_flat) if args.shaping else torch.zeros(N)
                     shaped = torch.as_tensor(r, dtype=torch.float32) + args.gamma * phi_next * (1 - term_t) - phi
                     RW[t] = shaped * args.reward_scale * VALID[t]
                     TERM[t], DONE[t] = term_t, done_t
@@ -374,7 +375,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
                     obs, phi = nobs, phi_next
                     if guide is not None and resetting.any():  # their reset step: the next episode's start
                         start_guided(np.flatnonzero(resetting))
-                        phi = A.potential(obs, k, args.v_flat)
+                        phi = A.potential(obs, k, args.v_flat) if args.shaping else torch.zeros(N)
                     resetting = done
                 ep_window = (ep_window + [(succ, ends)])[-(k.max_steps // T + 1):]
                 tu = time.perf_counter()
