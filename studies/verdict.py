@@ -18,8 +18,7 @@ without one.
 
 A witnessed success in a cell that a theorem declares impossible is a contradiction (a bug in the
 simulator, the witness or the theorem's premises) and raises, rather than letting either win silently.
-The RL agents appear beside the verdict as learnability: their pooled success rate as a share of the
-witnessed rate.
+Whether learning agents find these controls is the agent study's question (studies/ladder.py).
 """
 from __future__ import annotations
 
@@ -114,13 +113,3 @@ def cell_verdict(probe: str, table: str, witnessed: int, pairs: int, law: str = 
     return f"open ({some})" if some else "open"
 
 
-def learnability(rl_successes: int, rl_episodes: int, witnessed: int, pairs: int):
-    """(RL success rate, its exact 95 % interval, the rate as a share of the witnessed rate, the share's
-    interval) or None where the witnessed rate is 0 (nothing to compare with)."""
-    from studies.stats import clopper_pearson
-    if witnessed == 0:
-        return None
-    rate = rl_successes / rl_episodes
-    lo, hi = clopper_pearson(rl_successes, rl_episodes)
-    w = witnessed / pairs
-    return rate, (lo, hi), rate / w, (lo / w, hi / w)

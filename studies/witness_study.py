@@ -1,8 +1,8 @@
 """The witness study and the verdict table: every probe (steer park, drive reach, both park) on every table
 (the open plane, ellipse, stadium, circle, rounded rectangle) and every law (elastic, plastic, restitution
 e = 0.5), N start/target pairs per cell certified by studies/witness.py, the verdict per (actuation, law,
-table) from the theory and the witnesses (studies/verdict.py), and the RL study's agents beside it as
-learnability (docs/study.csv). Writes docs/witnesses.md (+ witnesses.csv per cell, witnesses_pairs.csv
+table) from the theory and the witnesses (studies/verdict.py); the learning agents are the agent study's
+(studies/ladder.py). Writes docs/witnesses.md (+ witnesses.csv per cell, witnesses_pairs.csv
 per pair, witnesses_run.json) and the README's answer block.
 
     python -m studies.witness_study [--pairs N] [--workers W]   # -> docs/witnesses.md, README.md
@@ -25,7 +25,7 @@ from pathlib import Path
 
 from studies.cells import TABLES, TABLE_NAMES, EXTRA_TABLES, ALL_TABLES, LAWS, PROBE_TASKS, cell_spec, all_cells, table_name
 from studies.stats import clopper_pearson
-from studies.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, learnability, possible_by_theorem, theorem_of
+from studies.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, possible_by_theorem, theorem_of
 from studies.witness import PROBES, Witness, positive_int
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -133,28 +133,6 @@ def write_csv(path, rows, fields):
         w.writerows(rows)
 
 
-def study_rl(study_csv: Path):
-    """{(probe, table, law): (agent, successes, episodes)} of the best trained agent (PPO/SAC, pooled over
-    seeds) of each cell of the RL study (docs/study.csv), the plane's row standing for every law."""
-    if not study_csv.is_file():
-        return {}
-    names = {v: k for k, v in LAWS.items()}
-    best = {}
-    for r in read_csv(study_csv):
-        if r["agent"] not in ("ppo", "sac"):
-            continue
-        if r["table"] == "Plane":
-            keys = [(r["probe"], "plane", "-")]
-        else:
-            shape, law = r["table"].split("-", 1)
-            keys = [(r["probe"], shape.lower(), names[law])]
-        succ = int(round(float(r["success"]) * int(r["episodes"])))
-        for key in keys:
-            if key not in best or succ / int(r["episodes"]) > best[key][1] / best[key][2]:
-                best[key] = (r["agent"], succ, int(r["episodes"]))
-    return best
-
-
 def _key(r):
     return r["probe"], r["table"], r["law"]
 
@@ -195,27 +173,6 @@ def extra_rows(cells):
     return lines
 
 
-def learn_rows(cells, rl):
-    lines = ["| actuation | table | law | witnessed | best RL agent: success [95 % exact CI] | share of the witnessed rate |",
-             "| --- | --- | --- | --- | --- | --- |"]
-    for c in cells:
-        key = _key(c)
-        if key not in rl:
-            continue
-        agent, s, n = rl[key]
-        k, N = int(c["witnessed"]), int(c["pairs"])
-        le = learnability(s, n, k, N)
-        if le is None:
-            rate, (lo, hi) = s / n, clopper_pearson(s, n)
-            share = "- (nothing witnessed)"
-        else:
-            rate, (lo, hi), sh, (slo, shi) = le
-            share = f"{sh:.2f} [{slo:.2f}, {min(shi, 99):.2f}]"
-        lines.append(f"| {PROBE_TASKS[c['probe']]} | {TABLE_NAMES[c['table']]} | {c['law']} | {k}/{N} | "
-                     f"{agent} {s}/{n} = {rate:.3f} [{lo:.4f}, {hi:.4f}] | {share} |")
-    return lines
-
-
 def failures(pair_rows):
     """Markdown lines: per cell, the pairs not witnessed grouped by reason."""
     lines = []
@@ -242,10 +199,10 @@ def summary(cells):
     return out
 
 
-def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
-    """The README's answer, computed from the verdict table and the RL study's rows (never typed): a grid of
-    the verdicts (per table, the laws' k/N), then per actuation the range of witnessed shares and the RL
-    agents' learnability."""
+def readme_answer(cells, report="docs/witnesses.md") -> str:
+    """The README's answer, computed from the verdict table (never typed): a grid of the verdicts (per table, the
+    laws' k/N), then per actuation the range of witnessed shares and what the theorems prove; the learning agents
+    are the agent study's (studies/ladder.py), which writes the README's one answer about them."""
     by = {_key(c): c for c in cells}
     law_names = " · ".join(LAWS[law].lower() if law != "0.5" else "e = 0.5" for law in LAWS)
     lines = [f"Answer from theorems and certified witness episodes ([{report}]({report}); theory: "
@@ -286,20 +243,10 @@ def readme_answer(cells, rl, report="docs/witnesses.md") -> str:
                         f"with room to aim)")
         if opn:
             bits.append(f"open in {len(opn)} cells")
-        shares, succ = [], []
-        for c in wit:
-            if _key(c) in rl:
-                agent, k, n = rl[_key(c)]
-                shares.append(learnability(k, n, int(c["witnessed"]), int(c["pairs"]))[2])
-                succ.append((k, n))
-        if shares:
-            bits.append(f"the RL study's best agents (PPO/SAC) reach {_span(shares, '.2f')} of the "
-                        f"witnessed rate on the {len(shares)} of these cells it trained on"
-                        + (f" (0 successes in each: exact 95 % upper bounds up to "
-                           f"{max(clopper_pearson(k, n)[1] for k, n in succ):.4f})" if not any(k for k, _ in succ) else ""))
         if bits:
             sentences.append(f"**{PROBE_TASKS[probe]}**: " + "; ".join(bits) + ".")
-    lines.append(" ".join(sentences) + " The RL rates are learnability, not the verdict.")
+    lines.append(" ".join(sentences) + " Whether learning agents find these controls: the agent study, "
+                 "[docs/ladder.md](docs/ladder.md).")
     extra = [c for c in cells if c["table"] in EXTRA_TABLES]
     if extra:
         lines += ["", "The theorems apply to every cell, overrides and user tables included (steer only, e = 0.5): "
@@ -334,7 +281,7 @@ def _span(values, fmt: str) -> str:
     return lo if lo == hi else f"{lo} to {hi}"
 
 
-def write_report(out: Path, cells, pair_rows, rl, meta):
+def write_report(out: Path, cells, pair_rows, meta):
     from studies.common import machine_lines
     lines = ["# Which actuations and walls make the penny controllable: theorems and certified witnesses", "",
              *meta["machine"], f"- command: `{meta['command']}` ({meta['wall_s']:.0f} s wall, "
@@ -366,14 +313,10 @@ def write_report(out: Path, cells, pair_rows, rl, meta):
              "spawn and target regions, time limit and speeds (penny_env/analysis/controllability_theorems.py); a pair "
              "that a theorem excludes is still searched (a witness there would stop the report):", "",
              *extra_rows(cells), "",
-             "## Learnability: the RL study's agents beside the verdict", "",
-             "The best trained agent (PPO or SAC, highest pooled success) of each cell of the RL study "
-             "([study.md](study.md), from docs/study.csv: success pooled over its seeds; per-seed data lives in "
-             "runs/, not in the repository, so the intervals here are exact Clopper-Pearson intervals of the pooled "
-             "counts, not clustered by seed; a rerun of the study reports seed-clustered intervals). Share: its "
-             "success rate divided by the witnessed rate of the same cell (the witnessed rate is itself a lower "
-             "bound of the solvable share; the share's interval carries only the agent's uncertainty).", "",
-             *learn_rows(cells, rl), "",
+             "## Learning agents", "",
+             "Whether learning agents find the controls that these witnesses prove to exist is the agent study's "
+             "question: [ladder.md](ladder.md) (python -m studies.ladder), each agent's success beside the witnessed "
+             "rate of the same pair seeds.", "",
              "## Witnesses per cell", "",
              "k/N: pairs witnessed (pair i: the probe's reset with seed i); 95 % exact Clopper-Pearson interval of "
              "the witnessable share; CPU seconds of the cell's searches and certifications.", "",
@@ -411,7 +354,6 @@ def main(argv=None):
     ap.add_argument("--out-dir", type=Path, default=None, help="report folder (default docs/; --quick: a new "
                     "temporary folder)")
     ap.add_argument("--report-only", action="store_true", help="rewrite the report and README from the CSVs")
-    ap.add_argument("--study-csv", type=Path, default=DOCS / "study.csv", help="the RL study's rows (learnability)")
     args = ap.parse_args(argv)
     if args.out_dir is not None:
         out_dir = args.out_dir.resolve()
@@ -455,11 +397,10 @@ def main(argv=None):
                                     c["excluded"], c["excluded_by"], c["possible"], c["possible_by"])
     if args.report_only:  # (the cells' CSV carries the recomputed verdicts; the pairs' CSV and the counts are kept)
         write_csv(cells_csv, cells, CELL_FIELDS)
-    rl = study_rl(args.study_csv)
-    write_report(out_dir / "witnesses.md", cells, pair_rows, rl, meta)
+    write_report(out_dir / "witnesses.md", cells, pair_rows, meta)
     print(f"wrote {out_dir / 'witnesses.md'}")
     if out_dir.resolve() == DOCS.resolve() and not args.quick:
-        if update_readme(ROOT / "README.md", readme_answer(cells, rl)):
+        if update_readme(ROOT / "README.md", readme_answer(cells)):
             print("README.md: the answer updated from the verdict table")
     return cells
 
