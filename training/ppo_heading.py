@@ -326,10 +326,12 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
     stats = {}
     progress = None
     if out is not None:
-        fresh = resume is None or not (out / "progress.csv").is_file()
-        progress = open(out / "progress.csv", "w" if fresh else "a")
-        if fresh:
-            progress.write(",".join(PROGRESS) + "\n")
+        kept = []
+        if resume is not None and (out / "progress.csv").is_file():  # the rows up to the checkpoint's step
+            kept = [r for r in (out / "progress.csv").read_text().splitlines()[1:]
+                    if r.split(",")[0].isdigit() and int(r.split(",")[0]) <= state["global_step"]]
+        progress = open(out / "progress.csv", "w")
+        progress.write("".join(r + "\n" for r in [",".join(PROGRESS)] + kept))
     train_success = float("nan")
     try:
         for it in range(state["it"] + 1, iterations + 1):

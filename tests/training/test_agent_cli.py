@@ -81,31 +81,44 @@ def test_ctrl_c_says_what_was_saved(capsys, tmp_path):
     assert e.value.code == 130 and "interrupted at 1,234 env steps; nothing was saved" in capsys.readouterr().err
 
 
+SMALL = ["--total-timesteps", "8192", "--hp", "num_envs=64", "minibatch_size=1024", "val_every=4096",
+         "val_episodes=16"]
+
+
 @pytest.mark.slow
 def test_interrupt_then_resume_goes_on_from_the_checkpoint(capsys, tmp_path):
     out = tmp_path / "run"
     real = ppo_heading.train
 
-    def interrupted(args, checkpoints=(), on_checkpoint=None, log=print, resume=None):
-        def stop(steps, policy):
-            raise KeyboardInterrupt
-        return real(args, checkpoints=[1], on_checkpoint=stop, log=log, resume=resume)
+    def stopped_at(steps_at, error):
+        def train(args, checkpoints=(), on_checkpoint=None, log=print, resume=None):
+            def stop(steps, policy):
+                if steps >= steps_at:
+                    raise error
+            return real(dataclasses.replace(args, save_every=4096), checkpoints=[2048, 4096, 6144], on_checkpoint=stop,
+                        log=log, resume=resume)
+        return train
 
+    # a process killed after its last save (not Ctrl-C): checkpoint.pt at 4096, progress.csv one row further
+    with pytest.raises(RuntimeError, match="killed"):
+        agent_cli.cli("training.ppo_heading", ppo_heading.Args, stopped_at(6144, RuntimeError("killed")),
+                      SMALL + ["--out", str(out)], ppo_heading.quick_args, ppo_heading.CHECKS)
+    assert (out / "checkpoint.pt").is_file() and "6144," in (out / "progress.csv").read_text()
+    # Ctrl-C saves where it stopped and says how to go on
     with pytest.raises(SystemExit) as e:
-        agent_cli.cli("training.ppo_heading", ppo_heading.Args, interrupted, ["--quick", "--out", str(out)],
-                      ppo_heading.quick_args, ppo_heading.CHECKS)
+        agent_cli.cli("training.ppo_heading", ppo_heading.Args, stopped_at(6144, KeyboardInterrupt()),
+                      ["--resume", str(out)], ppo_heading.quick_args, ppo_heading.CHECKS)
     err = capsys.readouterr().err
     assert e.value.code == 130 and f"saved {out / 'checkpoint.pt'}" in err and f"--resume {out}" in err
     # a second run into the folder is refused; a resume may change the budget only
     assert "not empty" in usage_error(capsys, ["--quick", "--out", str(out)])
     assert "only --total-timesteps may change" in usage_error(capsys, ["--resume", str(out), "--hp", "gamma=0.9"])
     res = agent_cli.cli("training.ppo_heading", ppo_heading.Args, ppo_heading.train,
-                        ["--resume", str(out), "--total-timesteps", "8192"], ppo_heading.quick_args, ppo_heading.CHECKS)
+                        ["--resume", str(out), "--total-timesteps", "10240"], ppo_heading.quick_args, ppo_heading.CHECKS)
     assert "resumed from" in capsys.readouterr().out
-    assert res["env_steps"] == 8192
+    assert res["env_steps"] == 10240
     rows = (out / "progress.csv").read_text().splitlines()
-    steps = [int(r.split(",")[0]) for r in rows[1:]]
-    assert steps == sorted(steps) and steps[0] == 2048 and steps[-1] == 8192 and len(set(steps)) == len(steps)
+    assert [int(r.split(",")[0]) for r in rows[1:]] == [2048, 4096, 6144, 8192, 10240]  # (each step once, in order)
     saved = json.loads((out / "results.json").read_text())
-    assert saved["args"]["total_timesteps"] == 8192 and saved["env_steps"] == 8192
+    assert saved["args"]["total_timesteps"] == 10240 and saved["env_steps"] == 10240
     assert dataclasses.asdict(ppo_heading.Args())["seed"] == saved["args"]["seed"]
