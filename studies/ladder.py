@@ -54,7 +54,7 @@ DOCS = ROOT / "docs"
 DEFAULT_CONFIG = ROOT / "configs" / "ladder" / "cpu.yaml"
 QUICK_CONFIG = ROOT / "configs" / "ladder" / "quick.yaml"
 KEYS = {"eval_seeds", "seeds", "first_checkpoint", "cells", "agents", "demos"}
-OPTIONAL_KEYS = {"fall"}  # fall: {before: AGENT, after: AGENT}: their learning diagnostics side by side
+OPTIONAL_KEYS = {"fall"}  # fall: [AGENT, ...]: recipes whose learning diagnostics are shown side by side
 AGENT_KEYS = {"module", "privileged", "probes", "budget", "args", "label", "seeds", "cells"}
 DEMO_SEED = 100_000      # demonstrations: witness episodes of seeds DEMO_SEED + j
 README_BEGIN = "<!-- ladder-answer: written by python -m studies.ladder (studies/ladder.py) -->"
@@ -129,9 +129,9 @@ def load_config(path) -> dict:
             raise ValueError(f"{path}: agents.{name}.args: {bad} are not fields of {a['module']}.Args")
         check_agent_args(module, dict(a.get("args") or {}), f"{path}: agents.{name}.args")
     fall = cfg.get("fall")
-    if fall is not None and not (isinstance(fall, dict) and set(fall) == {"before", "after"}
-                                 and all(v in cfg["agents"] for v in fall.values())):
-        raise ValueError(f"{path}: fall must be {{before: AGENT, after: AGENT}} with two of the config's agents")
+    if fall is not None and not (isinstance(fall, list) and len(fall) >= 2 and len(set(fall)) == len(fall)
+                                 and all(isinstance(v, str) and v in cfg["agents"] for v in fall)):
+        raise ValueError(f"{path}: fall must be a list of at least two of the config's agents, got {fall!r}")
     d = cfg["demos"]
     if not isinstance(d, dict) or set(d) != {"pairs"} or isinstance(d["pairs"], bool) or not isinstance(d["pairs"], int):
         raise ValueError(f"{path}: demos must be {{pairs: N}} (witness episodes per cell for the privileged agents)")
@@ -507,13 +507,14 @@ FALL_COLUMNS = (("val_success", "validation success"), ("train_success", "traini
                 ("explained_variance", "explained variance"), ("grad_norm", "gradient norm"))
 
 
-FALL_TEXT = ("The two recipes of PPO with the heading head on the same cells and seeds, every update's diagnostics "
-             "logged (training/ppo_heading.py's progress.csv). The first recipe anneals the learning rate linearly to "
-             "0 over the budget, lets the heading noise shrink to 0.05 rad and stops an update at a KL of 0.02; the "
-             "second adapts the learning rate to the measured KL (RSL-RL's rule, desired KL 0.01), keeps the noise "
-             "above 0.15 rad, and adds LayerNorm and Adam with beta1 = beta2. The table gives, per seed, the "
-             "validation peak, the lowest and the final validation after it, and the diagnostics at the peak and at "
-             "the end.")
+FALL_TEXT = ("Recipes of PPO with the heading head on the same cells and seeds (the config's key fall), every "
+             "update's diagnostics logged (training/ppo_heading.py's progress.csv). ppo_heading_annealed, the first "
+             "recipe: the learning rate annealed linearly to 0 over the budget, the heading noise free to shrink to "
+             "0.05 rad, an update stopped at a KL of 0.02; ppo_heading_floor: the first recipe with the noise kept "
+             "above 0.15 rad; ppo_heading, the ladder's: the learning rate adapted to the measured KL (RSL-RL's rule, "
+             "desired KL 0.01), the noise above 0.15 rad, LayerNorm, Adam with beta1 = beta2. Per seed: the "
+             "validation peak, the lowest and the final validation after it, and the learning rate, noise std and "
+             "gradient norm at the peak and at the end.")
 
 
 def progress_of(runs, job) -> dict | None:
@@ -535,29 +536,29 @@ def progress_of(runs, job) -> dict | None:
 
 
 def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
-    """The learning diagnostics of two recipes side by side (config key fall): per seed, the validation peak, what
-    followed it, and the diagnostics at the peak and at the end; a figure of every diagnostic against env steps."""
+    """The learning diagnostics of recipes side by side (config key fall: a list of agents), on the cells where at
+    least two of them ran: per seed, the validation peak, what followed it, and the diagnostics at the peak and at
+    the end; a figure of every diagnostic against env steps."""
     fall = cfg.get("fall")
     if not fall:
         return []
     lines = []
-    cells = [c for c in cfg["cells"] if (fall["before"], c) in results and (fall["after"], c) in results]
-    for cell in cells:
+    for cell in cfg["cells"]:
         runs_of = {}
-        for role in ("before", "after"):
+        for agent in fall:
             for job in jobs:
-                if job["agent"] == fall[role] and tuple(job["cell"]) == cell and result_of(runs, job, job_dir):
+                if job["agent"] == agent and tuple(job["cell"]) == cell and result_of(runs, job, job_dir):
                     p = progress_of(runs, job)
                     if p is not None:
-                        runs_of.setdefault(role, []).append((job["seed"], p))
+                        runs_of.setdefault(agent, []).append((job["seed"], p))
         if len(runs_of) < 2:
             continue
-        lines += [f"### {cell_name(cell)}: {fall['before']} (before) and {fall['after']} (after)", "",
+        lines += [f"### {cell_name(cell)}: {', '.join(runs_of)}", "",
                   "| recipe | seed | validation peak (env steps) | after the peak: lowest, final | drop after the peak | "
-                  "learning rate at the peak, end | noise std at the peak, end | KL at the peak, end |",
+                  "learning rate at the peak, end | noise std at the peak, end | gradient norm at the peak, end |",
                   "|---|---:|---|---|---:|---|---|---|"]
-        for role in ("before", "after"):
-            for seed, p in runs_of[role]:
+        for agent, seeds in runs_of.items():
+            for seed, p in seeds:
                 v = p["val_success"]
                 ok = np.flatnonzero(np.isfinite(v))
                 if not len(ok):
@@ -568,17 +569,17 @@ def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
 
                 def at(col, j):
                     return p[col][j] if col in p else math.nan
-                lines.append(f"| {fall[role]} | {seed} | {v[i]:.2f} ({p['global_step'][i]:.3g}) | {low:.2f}, {last:.2f} "
+                lines.append(f"| {agent} | {seed} | {v[i]:.2f} ({p['global_step'][i]:.3g}) | {low:.2f}, {last:.2f} "
                              f"| {v[i] - low:+.2f} | {at('lr', i):.1e}, {at('lr', -1):.1e} | {at('std', i):.3f}, "
-                             f"{at('std', -1):.3f} | {at('approx_kl', i):.4f}, {at('approx_kl', -1):.4f} |")
-        png = write_fall_figure(cell, runs_of, fall, out)
+                             f"{at('std', -1):.3f} | {at('grad_norm', i):.2f}, {at('grad_norm', -1):.2f} |")
+        png = write_fall_figure(cell, runs_of, out)
         if png:
             lines += ["", f"![the diagnostics of {cell_name(cell)}]({png})"]
         lines.append("")
     return lines
 
 
-def write_fall_figure(cell, runs_of, fall, out: Path) -> str | None:
+def write_fall_figure(cell, runs_of, out: Path) -> str | None:
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -587,14 +588,14 @@ def write_fall_figure(cell, runs_of, fall, out: Path) -> str | None:
         return None
     fig, axes = plt.subplots(2, 4, figsize=(13, 5.5), sharex=True)
     for ax, (col, title) in zip(axes.ravel(), FALL_COLUMNS):
-        for role, color in (("before", "C3"), ("after", "C0")):
-            for k, (seed, p) in enumerate(runs_of.get(role, [])):
+        for r, (agent, seeds) in enumerate(runs_of.items()):
+            for k, (seed, p) in enumerate(seeds):
                 if col not in p:
                     continue
                 x, y = p["global_step"], p[col]
                 ok = np.isfinite(y)
-                ax.plot(x[ok], y[ok], color=color, lw=0.8, alpha=0.8, marker="." if col == "val_success" else None,
-                        ms=3, label=f"{fall[role]}" if k == 0 else None)
+                ax.plot(x[ok], y[ok], color=f"C{r}", lw=0.8, alpha=0.8, marker="." if col == "val_success" else None,
+                        ms=3, label=agent if k == 0 else None)
         ax.set_title(title, fontsize=9)
         if col in ("lr", "approx_kl", "grad_norm"):
             ax.set_yscale("log")

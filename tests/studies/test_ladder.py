@@ -106,6 +106,28 @@ def test_a_goal_is_met_only_where_every_seed_and_the_interval_clear_it():
     assert any("Steer-stadium-elastic, witness-guided" in g and "**not run**" in g for g in lines)
 
 
+def test_the_fall_section_puts_the_recipes_diagnostics_side_by_side(tmp_path):
+    cell = ("Steer", "stadium", "elastic")
+    cfg = {"eval_seeds": 4, "cells": [cell], "fall": ["a", "b"],
+           "agents": {"a": {"privileged": False}, "b": {"privileged": False}}}
+    jobs, results = [], {}
+    for agent, vals in (("a", [0.1, 0.5, 0.2]), ("b", [0.1, 0.5, 0.6])):
+        job = {"agent": agent, "cell": list(cell), "seed": 0}
+        jobs.append(job)
+        folder = ladder.job_dir(tmp_path, job)
+        folder.mkdir(parents=True)
+        rows = ["global_step,val_success,train_success,std,lr,approx_kl,clip_frac,explained_variance,grad_norm"]
+        rows += [f"{(i + 1) * 1000},{v},0.1,0.2,1e-4,0.01,0.1,0.9,0.5" for i, v in enumerate(vals)]
+        rows.insert(2, "1500,nan,0.1,0.2,1e-4,0.01,0.1,0.9,0.5")  # (an update without a validation)
+        (folder / "progress.csv").write_text("\n".join(rows) + "\n")
+        (folder / "result.json").write_text(json.dumps({"job": job, "checkpoints": []}))
+        results[(agent, cell)] = [{"job": job}]
+    lines = ladder.fall_section(cfg, jobs, tmp_path, results, tmp_path / "r.md")
+    text = "\n".join(lines)
+    assert "| a | 0 | 0.50 (2e+03) | 0.20, 0.20 | +0.30 |" in text  # the peak, then the fall after it
+    assert "| b | 0 | 0.60 (3e+03) | 0.60, 0.60 | +0.00 |" in text
+
+
 def test_the_witnessed_rate_comes_from_the_witness_studys_pairs():
     w = ladder.witnessed_by_seed(("Steer", "ellipse", "elastic"), 200)
     with open(ROOT / "docs" / "witnesses.csv") as f:
