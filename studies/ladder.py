@@ -638,16 +638,18 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
     figures = write_figures(cfg, results, out)
     done = sum(len(res) for res in results.values())
     cpu = sum(r.get("cpu_seconds", 0.0) for res in results.values() for r in res)
-    lines = header("The agent ladder: learned agents on the single-input cells beside the certified witnesses",
+    lines = header("The agent study: do baseline agents learn to use impacts? Learning agents on the single-input "
+                   "cells beside the certified witnesses",
                    "studies.ladder", list(argv))
     lines += [f"- jobs: {done} of {len(jobs)} finished ({cpu / 3600:.1f} CPU hours in the finished jobs; this "
               f"invocation {seconds:.0f} s); seeds per (agent, cell): {_seeds_words(cfg)} (the seeds column counts "
               f"those finished)" + (f"; {len(stale)} result(s) in {runs} made by other job configs not counted "
                                      f"(they rerun)" if stale else "") + "; evaluation: one deterministic "
               f"episode per pair seed 0..{cfg['eval_seeds'] - 1} (training/protocol.evaluate), the witness study's",
-              "- privileged agents (PRIVILEGED below) reset their training envs to chosen states and learn from certified "
-              f"witness episodes of training seeds {DEMO_SEED}+ (never the pair seeds); the others see only what the env "
-              "gives any agent", ""]
+              "- privileged agents (PRIVILEGED below) are guided in training by certified witness episodes of training "
+              f"seeds {DEMO_SEED}+ (never the pair seeds; resets of their training envs to the witnesses' starts); the "
+              "policy evaluated sees only the env's observation; the others see only what the env gives any agent",
+              ""]
     lines += ["## The answer", "", "Do baseline agents learn to use impacts? Per actuation (the README's block):", "",
               *answer_sentences(cfg, summary), ""]
     lines += ["## Goals", "", *goals(cfg, summary), ""]
