@@ -4,7 +4,7 @@ PPO with the study's settings, on the same env, in one run (issue 36, item 5).
     python -m devtools.ppo_speed [--env-id PennyProbeSteer-Stadium-Elastic-v0] [--rounds 3] [--threads 2]
                                  [--ppo-steps 1048576] [--sb3-steps 65536] [--out docs/ppo_speed.md] [--quick]
 
-Both learners train on the env with the fair reward (studies/fair_pure_rl.py: the success bonus only) from a
+Both learners train on the env with the fair reward (training/protocol.py's FAIR_REWARD: the success bonus only) from a
 fresh agent, in this process, with ``--threads`` torch threads (the env's numba threads: the process's
 default, NUMBA_NUM_THREADS). They alternate, round after round (ladder PPO, SB3, ladder PPO, ...), so that both
 see the same load of a shared machine, and print nothing while they run. One unmeasured short run of each
@@ -15,8 +15,8 @@ first loads the compiled env step and torch's kernels.
   env-steps/s = env steps / ppo_torch's training seconds (from the first reset to the end of the last update),
   with the host seconds in ``env.step`` and in the updates.
 * **SB3 PPO**: ``PPO("MlpPolicy")`` over penny_env/sb3.py's PennySB3VecEnv (under VecMonitor) with
-  studies/fair_pure_rl.py's PPO_HYPER (16 envs x 256 steps, minibatches of 512, 5 epochs, gamma 0.999,
-  lambda 0.98, 64 x 64); env-steps/s = env steps / the wall seconds of ``model.learn``.
+  SB3_PPO (16 envs x 256 steps, minibatches of 512, 5 epochs, gamma 0.999, lambda 0.98, 64 x 64: the settings of
+  the removed fair_pure_rl study, docs/ladder_archive.csv); env-steps/s = env steps / the wall seconds of ``model.learn``.
 
 The report (``--out``; ``--quick``: a temporary directory, never docs/) gives the machine, date and load
 (studies/common.header), every round's rates, the best and the median per learner and their ratio.
@@ -36,6 +36,8 @@ from studies.common import header
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ENV = "PennyProbeSteer-Stadium-Elastic-v0"
 GOAL = 1.5e5  # env-steps/s end to end on 2 cores (issue 36, item 5)
+SB3_PPO = {"n_steps": 256, "batch_size": 512, "n_epochs": 5, "learning_rate": 3e-4, "gamma": 0.999, "gae_lambda": 0.98,
+           "policy_kwargs": {"net_arch": [64, 64]}}
 
 
 def run_ladder_ppo(env_id: str, steps: int, threads: int, quick: bool) -> dict:
@@ -55,11 +57,11 @@ def run_sb3_ppo(env_id: str, steps: int, threads: int, quick: bool) -> dict:
     from stable_baselines3.common.vec_env import VecMonitor
 
     from penny_env.sb3 import PennySB3VecEnv
-    from studies.fair_pure_rl import PPO_HYPER, reward_fields
+    from training.protocol import fair_reward_kwargs
     torch.set_num_threads(threads)
     n_envs = 4 if quick else 16
-    hyper = dict(PPO_HYPER, n_steps=64, batch_size=128, n_epochs=2) if quick else dict(PPO_HYPER)
-    venv = VecMonitor(PennySB3VecEnv(env_id, num_envs=n_envs, **reward_fields(env_id)))
+    hyper = dict(SB3_PPO, n_steps=64, batch_size=128, n_epochs=2) if quick else dict(SB3_PPO)
+    venv = VecMonitor(PennySB3VecEnv(env_id, num_envs=n_envs, **fair_reward_kwargs(env_id)))
     venv.seed(0)
     model = PPO("MlpPolicy", venv, seed=0, verbose=0, device="cpu", **hyper)
     t0 = time.perf_counter()

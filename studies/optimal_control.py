@@ -2,7 +2,7 @@
 
     python -m studies.optimal_control [--quick] [--pairs 50] [--single-input-pairs 10] [--cross-check-pairs 10]
                                        [--workers 16] [--out docs/optimal_control_central.md] [--runs runs/optimal_control]
-                                       [--study-runs runs/study] [--report-only | --cross-check-only]
+                                       [--report-only | --cross-check-only]
 
 The central study (docs/optimal_control_central.md): slow starts and central targets, where impacts gave
 no gain; studies/impact_oc.py (docs/optimal_control.md) reuses these problems and solvers on pairs where
@@ -38,9 +38,7 @@ impacts and is better; no gap does not prove that no better one with impacts exi
 Every solve is verified by simulating its controls again on the table; a solve that fails to converge
 or whose verification fails is reported as such ("failed"), never dropped.
 
-The solved pairs are saved to RUNS/rows.pkl; ``--report-only`` rewrites the report from them, and the
-report's last section runs the RL study's trained agents (``--study-runs``) on the same pairs
-(studies/optimal_vs_rl.py).
+The solved pairs are saved to RUNS/rows.pkl; ``--report-only`` rewrites the report from them.
 """
 from __future__ import annotations
 
@@ -477,7 +475,7 @@ def cross_check(rows, rel=1e-6):
     return out
 
 
-def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None):
+def write_report(rows, out_path: Path, commands, seconds: float):
     """The report from the solved rows (single shooting; multiple-shooting rows go to the cross-check)."""
     checked = [r for r in rows if not is_single(r)]
     rows = [r for r in rows if is_single(r)]
@@ -531,10 +529,6 @@ def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None
                   f"shooting lower in {c['single_better']}. Solver time: {c['seconds_single']:.0f} s single, "
                   f"{c['seconds_multiple']:.0f} s multiple, which is why the study above uses single shooting at "
                   f"these horizons (at most {MAX_ROWS} rows)."]
-    if study_runs is not None:
-        from studies.optimal_vs_rl import compare, markdown
-
-        lines += [""] + markdown(*compare(rows, study_runs), study_runs)
     out_path.write_text("\n".join(lines) + "\n")
     return summary
 
@@ -554,8 +548,6 @@ def main(argv=None):
     ap.add_argument("--runs", type=Path, default=None,
                     help="where the solved pairs are saved (rows.pkl; default runs/optimal_control, --quick: beside "
                          "the report)")
-    ap.add_argument("--study-runs", type=Path, default=Path("runs/study"),
-                    help="the RL study's job folder: its trained agents are run on the same pairs (default runs/study)")
     stage = ap.add_mutually_exclusive_group()
     stage.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
     stage.add_argument("--cross-check-only", action="store_true",
@@ -610,7 +602,7 @@ def main(argv=None):
         with open(saved, "wb") as f:
             pickle.dump((rows, seconds, commands), f)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_report(rows, out, commands, seconds, study_runs=args.study_runs)
+    write_report(rows, out, commands, seconds)
     print(f"wrote {out}")
     return out
 

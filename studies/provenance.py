@@ -70,9 +70,6 @@ REPORTS = {
     "docs/controllability.md": ("python -m studies.controllability --out docs/controllability.md",
                                 ("studies/controllability.py", "penny_env/analysis/dynamics.py",
                                  "penny_env/batch.py") + _BATCH + _PHYSICS + _TABLES),
-    "docs/study.md": ("python -m studies.study --config configs/study/large.yaml",
-                      ("studies/study.py", "studies/study_report.py", "configs/study/large.yaml") + _ENV + _PHYSICS
-                      + _TABLES),
     "docs/optimal_control.md": ("python -m studies.impact_oc --pairs 12 --workers 1",
                                 ("studies/impact_oc.py", "studies/oc_bounds.py", "studies/drive_zonotope.py",
                                  "studies/both_bound.py", "studies/optimal_control.py",
@@ -82,7 +79,7 @@ REPORTS = {
                                 + _TABLES),
     "docs/optimal_control_central.md": ("python -m studies.optimal_control --workers 2",
                                         ("studies/optimal_control.py", "studies/shooting.py",
-                                         "studies/optimal_vs_rl.py", "penny_env/physics/sensitivity.py")
+                                         "penny_env/physics/sensitivity.py")
                                         + _PHYSICS + _TABLES),
     "docs/billiards.md": ("python -m studies.billiards --out docs/billiards.md",
                           ("studies/billiards.py", "penny_env/analysis/boundary_map.py", "penny_env/batch.py",
@@ -101,28 +98,12 @@ REPORTS = {
                            "training/policies.py", "penny_env/analysis/controllability_theorems.py",
                            "penny_env/analysis/flat_sides.py", "penny_env/analysis/one_input.py",
                            "penny_env/envs/vector_env.py", "penny_env/envs/penny_env.py") + _ENV + _PHYSICS + _TABLES),
-    "docs/fair_rl.md": ("python -m studies.fair_rl --out docs/fair_rl.md",
-                        ("studies/fair_rl.py", "studies/witness.py", "studies/witness_study.py") + _ENV + _PHYSICS
-                        + _TABLES),
-    # steer-only park on two more tables, run beside docs/fair_rl.md with the same budget
-    **{f"docs/fair_rl_extra/{t}/fair_rl.md": (
-        f"python -m studies.fair_rl --cells Steer:{t}:elastic --out docs/fair_rl_extra/{t}/fair_rl.md",
-        ("studies/fair_rl.py", "studies/witness.py", "studies/witness_study.py") + _ENV + _PHYSICS + _TABLES)
-       for t in ("circle", "rounded_rectangle")},
-    "docs/fair_pure_rl.md": ("python -m studies.fair_pure_rl --out docs/fair_pure_rl.md",
-                             ("studies/fair_pure_rl.py", "studies/fair_rl.py", "studies/witness.py",
-                              "studies/witness_study.py", "studies/study_report.py", "training/episodes.py",
-                              "penny_env/sb3.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     "docs/contention.md": ("python -m devtools.contention --out docs/contention.md",
                            ("devtools/contention.py", "penny_env/backends/threads.py",
                             "penny_env/envs/vector_env.py") + _BATCH + _ENV + _PHYSICS + _TABLES),
     "docs/compile_time.md": ("python -m devtools.compile_time --out docs/compile_time.md",
                              ("devtools/compile_time.py", "penny_env/backends/threads.py",
                               "penny_env/backends/cache.py") + _BATCH + _ENV + _PHYSICS + _TABLES),
-    "docs/ppo_torch.md": ("python -m studies.ppo_compare --out docs/ppo_torch.md",
-                          ("studies/ppo_compare.py", "training/ppo_torch.py", "training/runner.py",
-                           "training/episodes.py", "configs/train/ppo_reach_ellipse.yaml", "penny_env/sb3.py",
-                           "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     # on a CUDA GPU (docs/gpu.md): the commands need one, so a change of these sources is stamped until one is lent
     "docs/throughput_gpu.md": ("python -m devtools.throughput_gpu --variants --out docs/throughput_gpu.md",
                                ("devtools/throughput_gpu.py", "devtools/throughput.py") + _CUDA + _ENV + _PHYSICS
@@ -139,7 +120,7 @@ REPORTS = {
                         "penny_env/envs/vector_env.py")
                        + _ENV + _PHYSICS + _TABLES),
     "docs/ppo_speed.md": ("python -m devtools.ppo_speed --out docs/ppo_speed.md",
-                          ("devtools/ppo_speed.py", "training/ppo_torch.py", "studies/fair_pure_rl.py",
+                          ("devtools/ppo_speed.py", "training/ppo_torch.py", "training/protocol.py",
                            "penny_env/sb3.py", "penny_env/envs/vector_env.py") + _ENV + _PHYSICS + _TABLES),
     # the comparison of two source trees: its numbers come from the trees it names, so only its own
     # module makes it stale
@@ -153,6 +134,9 @@ REPORTS = {
                                         "--out docs/throughput_compare_busy.md",
                                         ("devtools/throughput_compare.py",)),
 }
+# reports whose command was removed, kept unchanged because another command still reads them: not checked
+ARCHIVED = {"docs/study.md": "the removed RL study (studies.study, CHANGELOG.md): studies.witness_study reads its "
+                             "docs/study.csv for the learnability column until it reads the ladder"}
 # the command modules whose header writes the line (common.header's module argument -> report)
 MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "studies.work_precision": "docs/work_precision.md",
@@ -162,7 +146,6 @@ MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "studies.paper_figures": "docs/paper_figures.md",
                   "studies.dynamics": "docs/dynamics.md",
                   "studies.controllability": "docs/controllability.md",
-                  "studies.study": "docs/study.md",
                   "studies.optimal_control": "docs/optimal_control_central.md",
                   "studies.impact_oc": "docs/optimal_control.md",
                   "devtools.throughput_compare": "docs/throughput_compare.md",
@@ -171,11 +154,8 @@ MODULE_REPORTS = {"studies.bench_solvers": "docs/bench_solvers.md",
                   "studies.billiards_answer": "docs/billiards_answer.md",
                   "studies.lyapunov_spread": "docs/lyapunov_spread.md",
                   "studies.witness_study": "docs/witnesses.md",
-                  "studies.fair_rl": "docs/fair_rl.md",
-                  "studies.fair_pure_rl": "docs/fair_pure_rl.md",
                   "devtools.contention": "docs/contention.md",
                   "devtools.compile_time": "docs/compile_time.md",
-                  "studies.ppo_compare": "docs/ppo_torch.md",
                   "devtools.throughput_gpu": "docs/throughput_gpu.md",
                   "studies.ppo_torch_report": "docs/ppo_torch_gpu.md",
                   "studies.ladder": "docs/ladder.md",

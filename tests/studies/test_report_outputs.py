@@ -27,8 +27,7 @@ def test_report_path(reports_untouched):
 # the report commands whose --out has a default; the others (bench_solvers, stability, work_precision,
 # throughput) write nothing without --out
 DEFAULTED = [("studies.dynamics", "matplotlib"), ("studies.paper_figures", "matplotlib"),
-             ("studies.controllability", "matplotlib"), ("studies.baselines", "stable_baselines3"),
-             ("studies.ppo_compare", "stable_baselines3")]
+             ("studies.controllability", "matplotlib"), ("studies.baselines", "stable_baselines3")]
 
 
 @pytest.mark.parametrize("module, needs", DEFAULTED)
