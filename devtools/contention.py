@@ -115,7 +115,7 @@ def measure(setups, n: int, steps: int, repeats: int) -> list[dict]:
 
 
 def report(rows, n: int, steps: int, repeats: int, command: str, load_before: float) -> str:
-    from studies.provenance import stamp_line
+    from lab.provenance import stamp_line
     when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     ref = next((r for r in rows if r["setup"] == "penny_env default"), None)
     lines = ["# Vector env beside a busy process", "",
@@ -152,7 +152,7 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--setups", nargs="+", choices=list(SETUPS), help="setups (default: all available)")
     args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
+    from lab.common import refuse_quick_into_docs
     refuse_quick_into_docs(args.out, args.quick)
     if args.quick:
         n, steps, repeats, setups = 64, 20, 1, ["penny_env default", "1 thread"]

@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from studies.common import header
+from lab.common import header
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ENV = "PennyProbeSteer-Stadium-Elastic-v0"

@@ -196,7 +196,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
+    from lab.common import refuse_quick_into_docs
     refuse_quick_into_docs(a.out, a.quick)
     if a.quick:
         a.n, a.fresh, a.warmup, a.steps = min(a.n, 64), 5, 300 if a.warmup >= 300 else a.warmup, 10
@@ -225,7 +225,7 @@ def main(argv=None) -> int:
 
 def rare_report(a, argv, results, trees) -> list:
     try:
-        from studies.common import header
+        from lab.common import header
         lines = header("The share of env-steps on the rare path", "devtools.rare_share", argv)
     except Exception:  # noqa: BLE001 (a tree without studies/: the bare header)
         lines = ["# The share of env-steps on the rare path", ""]

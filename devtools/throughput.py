@@ -35,8 +35,8 @@ import numpy as np
 import gymnasium as gym
 
 import penny_env  # noqa: F401  (registers the ids)
-from studies.common import cpu_model, load_line
-from studies.provenance import stamp_line
+from lab.common import cpu_model, load_line
+from lab.provenance import stamp_line
 from penny_env.envs.registration import env_ids
 
 WALLED = "PennyImpacts-Stadium-v0"
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--readme", default=None, help="also replace the block between <!-- throughput:start --> and "
                                                     "<!-- throughput:end --> in this file (README.md) with the tables")
     args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
+    from lab.common import refuse_quick_into_docs
     refuse_quick_into_docs(args.out, args.quick)
     quick = args.quick
     if quick and args.readme:
@@ -221,7 +221,7 @@ def readme_summary(lines: list[str]) -> list[str]:
 
 def update_readme(path: str, lines: list[str]) -> None:
     """Put the report's summary (readme_summary) between the README's markers."""
-    from studies.common import replace_block
+    from lab.common import replace_block
     start, end = "<!-- throughput:start -->", "<!-- throughput:end -->"
     if not replace_block(path, start, end, "\n".join(readme_summary(lines)).rstrip()):
         raise ValueError(f"{path}: no {start} ... {end} block to replace")

@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> str:
                     help="env-steps per vector measurement (3 to 4000 steps of the vector env)")
     args = ap.parse_args(argv)
     if not args.worker:  # (a worker imports only its own tree, which may have no studies/)
-        from studies.common import refuse_quick_into_docs
+        from lab.common import refuse_quick_into_docs
         refuse_quick_into_docs(args.out, args.quick)
     if args.quick:
         args.rounds, args.ids = 1, args.ids or list(QUICK_IDS)
@@ -179,8 +179,8 @@ def main(argv: list[str] | None = None) -> str:
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
     cmd = "python -m devtools.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
     # (imported here: the workers run this file against other source trees, which may lack these)
-    from studies.common import load_line
-    from studies.provenance import stamp_line
+    from lab.common import load_line
+    from lab.provenance import stamp_line
     lines = ["# Throughput before and after a change, side by side", "",
              f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
              f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",

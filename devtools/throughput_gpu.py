@@ -345,7 +345,7 @@ def fmt(v):
 
 def report(a, argv, name, results, sim) -> list:
     from penny_env.backends.env import FAST_MAX_REGISTERS
-    from studies.common import header
+    from lab.common import header
     lines = header("GPU throughput of the vector env, like for like", "devtools.throughput_gpu", argv)
     lines += [f"- device: {name}; CPU backend (numba) on {os.cpu_count()} cores of the same machine", ""]
     if sim:
@@ -411,12 +411,12 @@ def report(a, argv, name, results, sim) -> list:
 
 
 def table(headers, rows):
-    from studies.common import table as t
+    from lab.common import table as t
     return t(headers, rows)
 
 
 def main(argv: list[str] | None = None) -> int:
-    from studies.common import report_path, write
+    from lab.common import report_path, write
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="tiny N and windows under numba's CUDA simulator where there "

@@ -21,7 +21,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     import gymnasium as gym
     import penny_env  # noqa: F401
-    from studies.common import header, report_path
+    from lab.common import header, report_path
     from training.train import evaluate
 
     ids = sorted(k for k in gym.registry if k.startswith("Penny"))

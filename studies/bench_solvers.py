@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from studies import common
+from lab import common
 from studies.integrators import run_simulate, solve_ivp_hybrid
 from studies.matching import match_impacts, unresolvable_mask
 from studies.reference import paper_scenes
@@ -165,7 +165,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="fewer repeats")
     ap.add_argument("--out", default=None, help="write a Markdown report here (e.g. docs/bench_solvers.md)")
     args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
+    from lab.common import refuse_quick_into_docs
     refuse_quick_into_docs(args.out, args.quick)
     rows = run(quick=args.quick)
     lines = report(rows, argv)

@@ -33,7 +33,7 @@ import numpy as np
 from penny_env import batch
 from penny_env.physics import PennyParams, make_law, make_table
 from penny_env.analysis import boundary_map as bm
-from studies.stats import clopper_pearson
+from lab.stats import clopper_pearson
 
 TABLES = {"circle": {"kind": "circle", "radius": 0.2},
           "ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2},
@@ -374,7 +374,7 @@ def _answer_block(out) -> list[str]:
 
 
 def main(argv=None):
-    from studies.common import fmt, header, report_path, table
+    from lab.common import fmt, header, report_path, table
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

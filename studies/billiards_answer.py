@@ -248,7 +248,7 @@ def fate(tname, law, cfg, params, rho, seed):
 # -- the answer ------------------------------------------------------------------------------------------------
 def summarise(res, cfg) -> dict:
     """The numbers the answer quotes, from the raw results."""
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
 
     s = {"impacts": cfg["impacts"], "tables": {}}
     n_max = max(n for n in cfg["checkpoints"] if n <= cfg["impacts"])
@@ -403,7 +403,7 @@ def _span(r):
 def update_block(path: Path, block: str) -> bool:
     """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
     the block) rewritten; False where the file has none (studies/common.replace_block)."""
-    from studies.common import replace_block
+    from lab.common import replace_block
     return replace_block(path, README_BEGIN, README_END, block)
 
 
@@ -502,7 +502,7 @@ def plots(res, s, out, cfg):
 
 
 def write_report(res, s, out, argv, cfg, seconds):
-    from studies.common import header, table
+    from lab.common import header, table
 
     names = plots(res, s, out, cfg)
     lines = header("The penny's billiard: the answer to question 2 per law", "studies.billiards_answer", argv)
@@ -738,7 +738,7 @@ RELATED = [
 
 
 def main(argv=None):
-    from studies.common import command_line, report_path  # noqa: F401
+    from lab.common import command_line, report_path  # noqa: F401
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -40,7 +40,7 @@ START = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])  # the paper's initial s
 def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[dict]:
     """One row per (actuation, scene, horizon): the range of the unactuated speed over the sampled
     reachable set, the share of sequences with impacts, and the final speeds."""
-    from studies.common import progress as progress_bar
+    from lab.common import progress as progress_bar
     from penny_env.analysis.dynamics import reachable_set
 
     jobs = [(act, scene, T) for act in UNACTUATED for scene in SCENES for T in horizons]
@@ -74,7 +74,7 @@ def verdicts(rows) -> list[str]:
 
 
 def main(argv=None):
-    from studies.common import header, report_path
+    from lab.common import header, report_path
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

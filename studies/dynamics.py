@@ -18,7 +18,7 @@ TABLES = {"circle r = 0.2": {"kind": "circle", "radius": 0.2},
 
 
 def main(argv=None):
-    from studies.common import header, report_path
+    from lab.common import header, report_path
 
     argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -589,7 +589,7 @@ def _progress(rows, progress):
 
 def summarise(rows, margin=MARGIN):
     """Per (actuation, objective), pooled over the tables, and per table: the counts of the report."""
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
 
     out = []
     keys = []
@@ -680,7 +680,7 @@ def readme_block(summary, margin=MARGIN) -> str:
 def update_readme(path: Path, block: str) -> bool:
     """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
     the block) rewritten; False where the file has none (studies/common.replace_block)."""
-    from studies.common import replace_block
+    from lab.common import replace_block
     return replace_block(path, README_BEGIN, README_END, block)
 
 
@@ -798,7 +798,7 @@ def plot_examples(rows, path, n=4):
 
 
 def write_report(rows, out, argv, seconds, meta):
-    from studies.common import header
+    from lab.common import header
 
     summary = summarise(rows)
     png = out.with_name(out.stem + "_impacts.png")

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from studies.cells import PROBE_TASKS, TABLE_NAMES, cell_spec
-from studies.jobs import check_ray, finished, result_of, run_jobs
+from lab.jobs import check_ray, finished, result_of, run_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -369,7 +369,7 @@ def summarize(cfg, results) -> list[dict]:
     """One row per (cell, agent): pooled success with its seed-clustered interval, each seed's rate and their
     minimum, the witnessed rate of the same pair seeds, the shares, impacts per success, successes without an impact,
     the last decade's rise, and (agents that keep a best-validated snapshot) each seed's final policy."""
-    from studies.stats import seed_clustered_ci
+    from lab.stats import seed_clustered_ci
     out = []
     for cell in cfg["cells"]:
         wit = witnessed_by_seed(cell, cfg["eval_seeds"])
@@ -623,7 +623,7 @@ def archive_rows(cells, path=DOCS / "ladder_archive.csv") -> dict:
 
 
 def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) -> Path:
-    from studies.common import header
+    from lab.common import header
     results, stale = load_results(cfg, jobs, runs)
     summary = summarize(cfg, results)
     archived = archive_rows(cfg["cells"])
@@ -747,7 +747,7 @@ def write_figures(cfg, results, out: Path) -> dict:
 
 def write_readme(sentences) -> None:
     """The README's ladder block, between its markers (written only by a run that writes docs/ladder.md)."""
-    from studies.common import replace_block
+    from lab.common import replace_block
     replace_block(ROOT / "README.md", README_BEGIN, README_END, "\n\n".join(sentences))
 
 
@@ -780,7 +780,7 @@ def main(argv=None):
         ap.error(str(exc))
     jobs = make_jobs(cfg)
     t0 = time.perf_counter()
-    from studies.jobs import DamagedResult
+    from lab.jobs import DamagedResult
     from training.run_folder import RunFolderError, run_lock
     try:
         if not args.report_only:

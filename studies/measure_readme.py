@@ -110,7 +110,7 @@ def run_part(part: str, readme: str, workdir: Path, quick: bool = False, log=pri
     if quick:  # the current environment and this checkout's code (its compiled cache), run in the copy
         env["PYTHONPATH"] = str(ROOT)
         env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
-    from studies.common import machine_lines
+    from lab.common import machine_lines
     machine, load_at_start = machine_lines(), os.getloadavg()
     rows = []
     for step in steps_of(readme_block(readme, part)):
@@ -261,7 +261,7 @@ def update_readme(path: Path, results: dict) -> None:
     """Rewrite each part's sentence between its markers; ValueError if a marker is missing."""
     import textwrap
 
-    from studies.common import replace_text_block
+    from lab.common import replace_text_block
     text = path.read_text()
     for part in PARTS:
         begin, end = (m.format(part=part) for m in README_MARKS)
@@ -296,7 +296,7 @@ def main(argv=None):
         ap.error("--quick and --report-only exclude each other")
     if args.quick and args.readme:
         ap.error("--readme refuses --quick: a quick run never writes the README")
-    from studies.common import report_path, write
+    from lab.common import report_path, write
     out = report_path(args.out, args.quick, "readme_costs.md")
     store = out.with_suffix(".json")
     results = json.loads(store.read_text()) if store.is_file() else {}

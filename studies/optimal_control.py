@@ -482,7 +482,7 @@ def write_report(rows, out_path: Path, commands, seconds: float):
     summary = summarise(rows)
     png = out_path.with_name("optimal_control.png")
     has_png = plot_examples(rows, png)
-    from studies.common import machine_lines
+    from lab.common import machine_lines
 
     lines = ["# Does the optimal penny need impacts? (the central study: slow starts, central targets)", "",
              *machine_lines(),

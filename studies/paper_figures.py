@@ -17,7 +17,7 @@ import numpy as np
 
 import penny_env as pe
 import penny_env.batch as pb
-from studies.common import header, report_path
+from lab.common import header, report_path
 
 PAPER_STATE = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
 SCENES = [("circle", pe.Circle(0.2), "elastic"), ("circle", pe.Circle(0.2), "plastic"),

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def write_report(path, argv, results: dict) -> None:
     """A markdown report of one run: the machine and device, throughput, the final evaluation and the curve."""
-    from studies.common import header, table, write
+    from lab.common import header, table, write
     device = results["device"]
     if device.startswith("cuda"):
         import torch

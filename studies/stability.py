@@ -25,7 +25,7 @@ import traceback
 
 import numpy as np
 
-from studies import common
+from lab import common
 from penny_env.backends.pennies import advance_pennies
 from penny_env.physics import Circle, Ellipse, PennyParams, SolverSettings, Stadium, simulate
 from penny_env.physics.flows import end_kinematics, flow, kinetic_energy

@@ -117,7 +117,7 @@ def cell_verdict(probe: str, table: str, witnessed: int, pairs: int, law: str = 
 def learnability(rl_successes: int, rl_episodes: int, witnessed: int, pairs: int):
     """(RL success rate, its exact 95 % interval, the rate as a share of the witnessed rate, the share's
     interval) or None where the witnessed rate is 0 (nothing to compare with)."""
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
     if witnessed == 0:
         return None
     rate = rl_successes / rl_episodes

@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from studies import common
+from lab import common
 from studies.integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
 from studies.matching import match_impacts, state_error, unresolvable_mask
 from studies.reference import extra_scenes, paper_scenes
@@ -210,7 +210,7 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="Markdown report (e.g. docs/work_precision.md); PNGs go next to it")
     ap.add_argument("--all-scenes", action="store_true", help="also the restitution scene")
     args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
+    from lab.common import refuse_quick_into_docs
     refuse_quick_into_docs(args.out, args.quick)
     t0 = time.perf_counter()
     scs, results = run(quick=args.quick, all_scenes=args.all_scenes)

@@ -141,7 +141,7 @@ def test_stability_quick(reports_untouched):
 
 def test_progress_bars_are_optional(monkeypatch):
     """tqdm (and rich, for SB3's bar) are optional extras: without them the commands run without a bar."""
-    from studies import common
+    from lab import common
     from training import train
     monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm raises ImportError
     items = [1, 2, 3]

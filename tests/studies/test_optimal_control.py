@@ -215,7 +215,7 @@ def test_pays_needs_a_wall_hit_and_the_margin():
     rows.append(dict(row(sol(12, 2), sol(0, 0, ok=False)), actuation="drive", witness={"certified": False},
                      with_source="zero"))
     pooled = [s for s in io.summarise(rows) if s["scene"] == "all"][0]
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
     assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (5, 3, 3, 3)
     assert (pooled["without_failed"], pooled["only_with_failed"]) == (1, 1)
     assert pooled["ci"] == clopper_pearson(3, 5) and pooled["mean_gap"] == pytest.approx(0.5)

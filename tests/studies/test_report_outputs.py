@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from studies.common import report_path
+from lab.common import report_path
 
 REPO = Path(__file__).parents[2]
 

@@ -13,7 +13,7 @@ gym = pytest.importorskip("gymnasium")
 import penny_env  # noqa: E402,F401
 from studies import witness as wt  # noqa: E402
 from studies import witness_study as ws  # noqa: E402
-from studies.stats import clopper_pearson, seed_clustered_ci  # noqa: E402
+from lab.stats import clopper_pearson, seed_clustered_ci  # noqa: E402
 from studies.verdict import ANCHORS, cell_verdict, learnability  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,7 +1,7 @@
 """Which committed reports are older than the code that makes them.
 
-    python -m studies.provenance --check            # list stale reports, exit 1 if any
-    python -m studies.provenance --stamp docs/X.md --reason "..."   # accept without a rerun
+    python -m lab.provenance --check            # list stale reports, exit 1 if any
+    python -m lab.provenance --stamp docs/X.md --reason "..."   # accept without a rerun
 
 Rule: every report in docs/ records, in its header, a hash of its **sources**: its own command's
 module and the modules whose code computes its numbers (the physics or env step it measures, the
@@ -178,7 +178,7 @@ def sources_hash(report: str, root: Path = ROOT) -> str:
 def stamp_line(report: str, reason: str | None = None, root: Path = ROOT) -> str:
     """The header line of a report: its sources' hash, and where it was stamped without a rerun, why."""
     files = ", ".join(Path(p).name for p in REPORTS[report][1])
-    line = f"{PREFIX}{sources_hash(report, root)} of {files} (python -m studies.provenance --check)"
+    line = f"{PREFIX}{sources_hash(report, root)} of {files} (python -m lab.provenance --check)"
     if reason:
         line += f"; stamped {_dt.date.today().isoformat()} without a rerun: {reason}"
     return line

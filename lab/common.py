@@ -61,7 +61,7 @@ def command_line(module: str, argv: list[str]) -> str:
 def header(title: str, module: str, argv: list[str]) -> list[str]:
     """A report's first lines: title, machine, command and (for the committed reports) the hash of
     the sources that make its numbers (analysis/provenance.py)."""
-    from studies.provenance import MODULE_REPORTS, stamp_line
+    from lab.provenance import MODULE_REPORTS, stamp_line
 
     sources = [stamp_line(MODULE_REPORTS[module])] if module in MODULE_REPORTS else []
     return [f"# {title}", "", *machine_lines(), f"- command: `{command_line(module, argv)}`",

@@ -1,8 +1,8 @@
-"""studies.jobs: a job's result is its own (a changed config or a damaged file runs it again), failures are named."""
+"""lab.jobs: a job's result is its own (a changed config or a damaged file runs it again), failures are named."""
 import pytest
 
-from studies import jobs as jobs_module
-from studies.jobs import finished
+from lab import jobs as jobs_module
+from lab.jobs import finished
 
 
 def job_dir(runs, job):

@@ -6,8 +6,8 @@ import shutil
 
 import pytest
 
-from studies import provenance
-from studies.provenance import REPORTS, ROOT
+from lab import provenance
+from lab.provenance import REPORTS, ROOT
 
 if not (ROOT / "docs").is_dir() or not (ROOT / "training").is_dir():
     pytest.skip("not a source checkout (no docs/ or training/)", allow_module_level=True)
@@ -20,7 +20,7 @@ def test_committed_report_matches_its_sources(report):
     now = provenance.sources_hash(report)
     assert got == now, (f"{report} is older than the code that makes it (recorded {got}, sources now {now}); "
                         f"regenerate it: {REPORTS[report][0]} (or, for an hours-long study whose numbers the change "
-                        "does not reach: python -m studies.provenance --stamp REPORT --reason ...)")
+                        "does not reach: python -m lab.provenance --stamp REPORT --reason ...)")
 
 
 def test_every_report_with_a_command_is_tracked():
@@ -77,7 +77,7 @@ def test_check_command_exit_status(monkeypatch, capsys):
 
 
 def test_report_header_carries_the_sources_line(tmp_path):
-    from studies import common
+    from lab import common
     lines = common.header("t", "studies.stability", ["--quick"])
     assert any(line.startswith("- sources: sha256 " + provenance.sources_hash("docs/stability.md")) for line in lines)
     assert any(line.startswith("- load when this header was written:") for line in lines)
