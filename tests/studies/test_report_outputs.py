@@ -69,7 +69,8 @@ def test_throughput_quick_refuses_to_write_the_readme(reports_untouched):
 
 # every report command starts with lab.common.report_command; the commands with --quick that do not, and why
 REPORT_COMMANDS = ["studies.baselines", "studies.bench_solvers", "studies.billiards", "studies.billiards_answer",
-                   "studies.controllability", "studies.dynamics", "studies.impact_oc", "studies.measure_readme",
+                   "studies.controllability", "studies.dynamics", "studies.impact_oc", "studies.lyapunov_spread",
+                   "studies.measure_readme",
                    "studies.optimal_control", "studies.paper_figures", "studies.ppo_torch_report", "studies.stability",
                    "studies.work_precision", "devtools.compile_time", "devtools.contention", "devtools.cuda_kernels",
                    "devtools.ppo_speed", "devtools.rare_share", "devtools.throughput", "devtools.throughput_compare",
