@@ -649,13 +649,15 @@ README_BEGIN = "<!-- oc-answer: written by python -m studies.impact_oc -->"
 README_END = "<!-- /oc-answer -->"
 
 
+def overall(summary) -> list:
+    """(row, interval's low, high) of the summary's rows over all tables."""
+    return [(s, *s["ci"]) for s in summary if s["scene"] == "all"]
+
+
 def readme_block(summary, margin=MARGIN) -> str:
     """The README's answer: per actuation and objective the paying, failed and certified counts (from the summary)."""
     bits = []
-    for s in summary:
-        if s["scene"] != "all":
-            continue
-        lo, hi = s["ci"]
+    for s, lo, hi in overall(summary):
         if s["actuation"] == "steer":
             bits.append(f"steer-only park: no impact-free plan exists (theorem T2), a plan with impacts was found in "
                         f"{s['feasible_with']}/{s['pairs']} pairs (feasibility, not optimality)")
@@ -677,10 +679,7 @@ def readme_block(summary, margin=MARGIN) -> str:
 
 def answer(summary, margin=MARGIN) -> list[str]:
     lines = []
-    for s in summary:
-        if s["scene"] != "all":
-            continue
-        lo, hi = s["ci"]
+    for s, lo, hi in overall(summary):
         if s["actuation"] == "steer":
             lines.append(
                 f"- {LABEL[s['actuation']].capitalize()}, minimum {s['objective']}: feasibility, not optimality. No "
