@@ -18,7 +18,6 @@ compute capability is built from scratch (``fresh``).
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import glob
 import os
@@ -179,23 +178,22 @@ def occupancy(registers: int, cc=(9, 0), threads: int = THREADS) -> float:
 
 
 def main(argv=None) -> int:
+    from lab.common import report_command
     from penny_env.backends.physics import variant_name
     from penny_env.physics.tables import COMPILED_FORMULAS
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cc", nargs="+", default=["9.0"], help="compute capabilities (major.minor)")
-    ap.add_argument("--kinds", nargs="+", type=int, default=None, help="table kinds (-1: the plane); default: all")
-    ap.add_argument("--ptxas", default=None, help="path of ptxas (default: found automatically)")
-    ap.add_argument("--max-registers", type=int, default=None, help="numba-cuda's max_registers for the step kernel")
-    ap.add_argument("--out", default=None, help="write the register table (markdown) here")
-    ap.add_argument("--quick", action="store_true", help="the open plane's small kernels (observe_rows, "
-                    "clear_work_count) at the first --cc only, for the tests; never writes into docs/")
-    a = ap.parse_args(argv)
+
+    def options(ap):
+        ap.add_argument("--cc", nargs="+", default=["9.0"], help="compute capabilities (major.minor)")
+        ap.add_argument("--kinds", nargs="+", type=int, default=None, help="table kinds (-1: the plane); default: all")
+        ap.add_argument("--ptxas", default=None, help="path of ptxas (default: found automatically)")
+        ap.add_argument("--max-registers", type=int, default=None, help="numba-cuda's max_registers for the step kernel")
+    rep = report_command("devtools.cuda_kernels", "cuda_kernels.md", __doc__.splitlines()[0], argv, options=options,
+                         quick="the open plane's small kernels (observe_rows, clear_work_count) at the first --cc only, "
+                         "for the tests", out_help="the register table (markdown)")
+    a = rep.args
     ccs = [tuple(int(v) for v in c.split(".")) for c in a.cc]
     kinds = a.kinds if a.kinds is not None else [-1] + list(range(len(COMPILED_FORMULAS)))
     if a.quick:
-        from pathlib import Path
-        if a.out and (Path(__file__).resolve().parents[1] / "docs") in Path(a.out).resolve().parents:
-            ap.error("--quick never writes into docs/: give --out a path outside it")
         ccs, kinds = ccs[:1], [-1]
     names = {"observe_rows", "clear_work_count"} if a.quick else None
     ptxas = a.ptxas or find_ptxas()
@@ -214,12 +212,12 @@ def main(argv=None) -> int:
                              f"spills  occupancy {occ:.1%}")
                     rows.append((f"sm_{cc[0]}{cc[1]}", variant_name(kind), name, u, occ))
                 print(line, flush=True)
-    if a.out and rows:
+    if rows:
         import datetime
         import platform
         lines = ["# Registers and theoretical occupancy of the CUDA kernels", "",
                  f"`python -m devtools.cuda_kernels --cc {' '.join(a.cc)}"
-                 + (f" --max-registers {a.max_registers}" if a.max_registers else "") + f" --out {a.out}` on "
+                 + (f" --max-registers {a.max_registers}" if a.max_registers else "") + f" --out {rep.out.name}` on "
                  f"{platform.node() or 'this machine'} (no GPU: PTX from numba-cuda, registers from `ptxas -v`), "
                  f"{datetime.date.today().isoformat()}. Occupancy: resident warps per SM over 64, from registers alone "
                  f"(blocks of {THREADS} threads, no shared memory).", "",
@@ -228,8 +226,7 @@ def main(argv=None) -> int:
         for cc, table, name, u, occ in rows:
             lines.append(f"| {cc} | {table} | {name} | {u['registers']} | {u['stack']} | {u['spill_stores']} / "
                          f"{u['spill_loads']} | {occ:.1%} |")
-        with open(a.out, "w") as f:
-            f.write("\n".join(lines) + "\n")
+        rep.write(lines)
     return 0
 
 

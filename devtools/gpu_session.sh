@@ -1,30 +1,28 @@
 #!/usr/bin/env bash
 # One lent GPU session in one call of the device tool (docs/gpu.md, "Measuring on a lent GPU"). Before the call, on a
 # machine with PyPI: `bash devtools/gpu_wheels.sh` (gymnasium and what it needs that the image lacks, into .whl/,
-# git-ignored); the call carries it: carry [".whl"], command `bash devtools/gpu_session.sh [--ladder] [scale_rl
-# arguments...]`, timeout_s 480. Nothing outside the repository is used. On the device: install the carried wheels,
+# git-ignored); the call carries it: carry [".whl"], command `bash devtools/gpu_session.sh [--ladder]`, timeout_s
+# 480. Nothing outside the repository is used. On the device: install the carried wheels,
 # then, each part under its own time limit and each run even where one before it failed:
 #   1. the gpu tests (tests/backends/test_cuda.py -m gpu);
 #   2. tests/backends/cuda_sim_check.py on the real GPU (the CUDA backend against the CPU, step by step; it stops at the
 #      first difference and says where);
 #   3. devtools.throughput_gpu --variants -> docs/throughput_gpu.md;
 #   4. studies.ppo_torch_report (training.ppo_torch) with configs/train/ppo_torch_gpu.yaml -> docs/ppo_torch_gpu.md;
-#   5. studies.scale_rl (the arguments after the script's name) -> docs/scale_rl.md (+ .csv, .png), rewritten
-#      after each run so that a time limit keeps the cells done.
-#   6. with --ladder: the agent ladder's GPU cells (configs/ladder/gpu.yaml) -> docs/ladder_gpu.md, resumable: the
+#   5. with --ladder: the agent ladder's GPU cells (configs/ladder/gpu.yaml) -> docs/ladder_gpu.md, resumable: the
 #      jobs finished before the time limit are kept in $OUT/ladder_gpu (carry runs/ladder_gpu back to resume).
 # The reports are written where they are committed, then copied with one log to $OUT (8 files at most come back).
-# PARTS (default "tests check throughput ppo scale", and "ladder" after them with --ladder) picks the parts and their
+# PARTS (default "tests check throughput ppo", and "ladder" after them with --ladder) picks the parts and their
 # order, so that one call fits the device time: PARTS="check throughput tests" runs the step-by-step check first (its
 # compiles fill numba's cache for the rest), then the benchmark, then the tests; each part's time limit is
-# TESTS_SECONDS, CHECK_SECONDS, THROUGHPUT_SECONDS, PPO_SECONDS, SCALE_SECONDS, LADDER_SECONDS.
-#   usage: [PARTS="..."] bash devtools/gpu_session.sh [--ladder] [scale_rl arguments...]
+# TESTS_SECONDS, CHECK_SECONDS, THROUGHPUT_SECONDS, PPO_SECONDS, LADDER_SECONDS.
+#   usage: [PARTS="..."] bash devtools/gpu_session.sh [--ladder]
 set -u
 LADDER=
 if [ "${1:-}" = "--ladder" ]; then LADDER=1; shift; fi
-PARTS=${PARTS:-"tests check throughput ppo scale${LADDER:+ ladder}"}
+PARTS=${PARTS:-"tests check throughput ppo${LADDER:+ ladder}"}
 for p in $PARTS; do
-  case $p in tests|check|throughput|ppo|scale|ladder) ;; *) echo "PARTS: unknown part '$p' (tests check throughput ppo scale ladder)"; exit 2;; esac
+  case $p in tests|check|throughput|ppo|ladder) ;; *) echo "PARTS: unknown part '$p' (tests check throughput ppo ladder)"; exit 2;; esac
 done
 [ -n "$(ls .whl/*.whl 2>/dev/null)" ] || { echo "no wheels in .whl/: run bash devtools/gpu_wheels.sh first and carry .whl"; exit 2; }
 export PYTHONUNBUFFERED=1 OUT=${OUT:-/tmp/out} TF_CPP_MIN_LOG_LEVEL=3
@@ -59,11 +57,6 @@ part_ppo() {
       --device cuda --curve-points 5 ${PPO_ARGS:-} --report docs/ppo_torch_gpu.md --out /tmp/ppo 2>&1 | tail -6 >> "$LOG"
   cp docs/ppo_torch_gpu.md "$OUT/" 2>/dev/null
 }
-part_scale() {
-  stamp "scale_rl $*"
-  timeout "${SCALE_SECONDS:-170}" python3 -m studies.scale_rl --out docs/scale_rl.md "$@" 2>&1 | tail -12 >> "$LOG"
-  cp docs/scale_rl.md docs/scale_rl.csv docs/scale_rl.png "$OUT/" 2>/dev/null
-}
 part_ladder() {
   stamp "ladder (configs/ladder/gpu.yaml)"
   timeout "${LADDER_SECONDS:-240}" python3 -m studies.ladder --config configs/ladder/gpu.yaml --runs runs/ladder_gpu \
@@ -71,7 +64,7 @@ part_ladder() {
   cp docs/ladder_gpu.md "$OUT/" 2>/dev/null
   tar czf "$OUT/ladder_gpu.tgz" runs/ladder_gpu 2>/dev/null
 }
-for p in $PARTS; do "part_$p" "$@"; done
+for p in $PARTS; do "part_$p"; done
 stamp "done"
 ls -la "$OUT" >> "$LOG"
 cat "$LOG"

@@ -60,6 +60,23 @@ def torques(actions, p):
     return (a[:, 0] * p.gain1, z) if p.steer_only else (z, a[:, 0] * p.gain2)
 
 
+def load_mean(model_dir):
+    """(the network of the actions' mean, the log std) of a training.ppo_torch run folder, rebuilt from the shapes
+    its model.pt (the agent's state dict) holds: linear layers with tanh between them, CleanRL's MLP (this tool
+    imports no agent)."""
+    import torch
+    state = torch.load(os.path.join(model_dir, "model.pt"), map_location="cpu")
+    idx = sorted({int(k.split(".")[1]) for k in state if k.startswith("actor_mean.")})
+    layers = []
+    for i in idx:
+        w = state[f"actor_mean.{i}.weight"]
+        layers += [torch.nn.Linear(w.shape[1], w.shape[0]), torch.nn.Tanh()]
+        with torch.no_grad():
+            layers[-2].weight.copy_(w)
+            layers[-2].bias.copy_(state[f"actor_mean.{i}.bias"])
+    return torch.nn.Sequential(*layers[:-1]), state["actor_logstd"]
+
+
 class Policy:
     """Actions for the vector env: random (uniform, seeded) or a trained ppo_torch agent, sampled with seeded noise."""
 
@@ -67,23 +84,20 @@ class Policy:
         import numpy as np
         self.rng = np.random.default_rng(seed)
         self.shape = (env.num_envs, env.single_action_space.shape[0])
-        self.agent = None
+        self.mean = None
         if model_dir is not None:
             import torch
-
-            from training.ppo_torch import load_agent
             torch.set_num_threads(1)
-            self.agent = load_agent(model_dir)
+            self.mean, self.log_std = load_mean(model_dir)
             self.torch = torch
 
     def __call__(self, obs):
-        if self.agent is None:
+        if self.mean is None:
             return self.rng.uniform(-1.0, 1.0, self.shape)
         torch = self.torch
         with torch.no_grad():
-            x = torch.as_tensor(obs, dtype=torch.float32)
-            mean = self.agent.actor_mean(x).numpy().astype(float)
-            std = float(1.0) * torch.exp(self.agent.actor_logstd).numpy().astype(float)
+            mean = self.mean(torch.as_tensor(obs, dtype=torch.float32)).numpy().astype(float)
+            std = torch.exp(self.log_std).numpy().astype(float)
         return mean + std * self.rng.standard_normal(self.shape)
 
 
@@ -145,15 +159,25 @@ def worker(args) -> dict:
 
 
 def train_policies(ids, folder, steps, quick) -> None:
-    """A quick PPO (training.ppo_torch, CPU) per id into folder/<env_id>."""
-    from training.ppo_torch import Args, train
+    """A quick PPO per id into folder/<env_id>: training.ppo_torch's command line (CPU; 64 envs x 64 steps,
+    minibatches of 1024, 4 epochs), as a user runs it."""
+    import tempfile
+
+    import yaml
     for env_id in ids:
         out = os.path.join(folder, env_id)
         if os.path.exists(os.path.join(out, "model.pt")):
             continue
-        train(Args(env_id=env_id, total_timesteps=4096 if quick else steps, num_envs=64, num_steps=64,
-                   minibatch_size=1024, update_epochs=4, eval_episodes=8 if quick else 100, device="cpu", out=out),
-              log=None)
+        with tempfile.TemporaryDirectory() as tmp:
+            config = os.path.join(tmp, "ppo.yaml")
+            with open(config, "w") as f:
+                yaml.safe_dump({"env_id": env_id, "algo": "ppo", "num_envs": 64, "total_timesteps": 4096 if quick
+                                else steps, "eval_episodes": 8 if quick else 100,
+                                "algo_kwargs": {"n_steps": 64, "batch_size": 1024, "n_epochs": 4}}, f)
+            here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+            path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH")) if p)
+            subprocess.run([sys.executable, "-m", "training.ppo_torch", "--config", config, "--device", "cpu", "--out",
+                            out], check=True, stdout=subprocess.DEVNULL, env=dict(os.environ, PYTHONPATH=path))
         with open(os.path.join(out, "results.json")) as f:
             ev = json.load(f).get("eval") or {}
         print(f"trained {env_id}: evaluation success {ev.get('success_rate')}", flush=True)
@@ -179,9 +203,7 @@ def pct(c, key):
     return 100.0 * c[key] / c["env_steps"] if c["env_steps"] else float("nan")
 
 
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def _options(ap) -> None:
     ap.add_argument("--ids", nargs="+", default=None)
     ap.add_argument("--n", type=int, default=4096)
     ap.add_argument("--fresh", type=int, default=20, help="steps of the fresh window (from the reset)")
@@ -192,20 +214,29 @@ def main(argv=None) -> int:
     ap.add_argument("--policy-steps", type=int, default=POLICY_STEPS, help="env steps of each quick PPO")
     ap.add_argument("--policy-kinds", nargs="+", default=["random", "trained"], choices=["random", "trained"])
     ap.add_argument("--before", default=None, metavar="TREE", help="also measure TREE (its own penny_env)")
-    ap.add_argument("--out", default=None, help="write the report (markdown) here")
-    ap.add_argument("--quick", action="store_true")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    a = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
-    refuse_quick_into_docs(a.out, a.quick)
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--worker" in argv:  # (run in each tree measured)
+        ap = argparse.ArgumentParser()
+        ap.add_argument("--quick", action="store_true")
+        _options(ap)
+        a, rep = ap.parse_args(argv), None
+    else:
+        from lab.common import report_command
+        rep = report_command("devtools.rare_share", "rare_share.md", __doc__.splitlines()[0], argv, options=_options,
+                             quick="64 envs, short windows, two ids (tests)")
+        a = rep.args
     if a.quick:
         a.n, a.fresh, a.warmup, a.steps = min(a.n, 64), 5, 300 if a.warmup >= 300 else a.warmup, 10
     a.ids = a.ids or list(QUICK_IDS if a.quick else IDS)
-    if a.worker:
+    if rep is None:
         print(json.dumps(worker(a)))
         return 0
     if a.warmup < 300 and not a.quick:
-        ap.error("--warmup must be at least 300 (the steady window)")
+        rep.error("--warmup must be at least 300 (the steady window)")
     if a.train_policies:
         a.policies = a.train_policies
         train_policies(a.ids, a.train_policies, a.policy_steps, a.quick)
@@ -214,21 +245,12 @@ def main(argv=None) -> int:
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     trees = ([("before", a.before)] if a.before else []) + [("after" if a.before else "this tree", here)]
     results = {label: run_tree(tree, a) for label, tree in trees}
-    lines = rare_report(a, argv, results, trees)
-    print("\n".join(lines))
-    if a.out:
-        os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-        with open(a.out, "w") as f:
-            f.write("\n".join(lines) + "\n")
+    rep.write(rare_report(a, rep, results, trees), echo=True)
     return 0
 
 
-def rare_report(a, argv, results, trees) -> list:
-    try:
-        from studies.common import header
-        lines = header("The share of env-steps on the rare path", "devtools.rare_share", argv)
-    except Exception:  # noqa: BLE001 (a tree without studies/: the bare header)
-        lines = ["# The share of env-steps on the rare path", ""]
+def rare_report(a, rep, results, trees) -> list:
+    lines = rep.header("The share of env-steps on the rare path")
     lines += [f"Trees: {', '.join(f'{label} = {tree}' for label, tree in trees)}. N = {a.n} envs (CPU backend, NEXT_STEP), "
               f"fresh window: steps 0-{a.fresh - 1} after reset(seed=0); steady window: steps {a.warmup}-"
               f"{a.warmup + a.steps - 1}. Shares of env-steps, in %: rare (all), of which a pending reset, a period "

@@ -17,17 +17,12 @@ Every rate is the best of ``--repeats`` runs (default 3), the convention of Pyth
 shared machine the fastest run is the one least slowed down by other load. Every env, Penny or
 Gymnasium, is measured the same way.
 
-``--quick`` (used by the tests) runs few steps, N up to 256, two presets and one repeat.
+``--quick`` (used by the tests) runs few steps, N up to 256, two presets and one repeat, into a temporary folder
+unless --out names another (never docs/).
 """
 from __future__ import annotations
 
-import argparse
-import datetime as _dt
 import gc
-import os
-import platform
-import shlex
-import sys
 import time
 import tracemalloc
 
@@ -35,8 +30,6 @@ import numpy as np
 import gymnasium as gym
 
 import penny_env  # noqa: F401  (registers the ids)
-from studies.common import cpu_model, load_line
-from studies.provenance import stamp_line
 from penny_env.envs.registration import env_ids
 
 WALLED = "PennyImpacts-Stadium-v0"
@@ -119,31 +112,25 @@ def _steps_for(n: int, quick: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> str:
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="few steps, N <= 256 (for tests)")
-    ap.add_argument("--out", default=None, help="write a Markdown report here")
-    ap.add_argument("--repeats", type=int, default=None, help="runs per measurement, the best is reported "
-                                                               "(default 3, --quick 1)")
-    ap.add_argument("--readme", default=None, help="also replace the block between <!-- throughput:start --> and "
-                                                    "<!-- throughput:end --> in this file (README.md) with the tables")
-    args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
-    refuse_quick_into_docs(args.out, args.quick)
+    from lab.common import report_command
+
+    def options(ap):
+        ap.add_argument("--repeats", type=int, default=None, help="runs per measurement, the best is reported "
+                                                                   "(default 3, --quick 1)")
+        ap.add_argument("--readme", default=None, help="also replace the block between <!-- throughput:start --> "
+                        "and <!-- throughput:end --> in this file (README.md) with the tables")
+    rep = report_command("devtools.throughput", "throughput.md", __doc__.split("\n")[0], argv, options=options,
+                         quick="few steps, N <= 256 (for tests)")
+    args = rep.args
     quick = args.quick
     if quick and args.readme:
-        ap.error("--readme writes the README's throughput table: it takes a full run, not --quick")
+        rep.error("--readme writes the README's throughput table: it takes a full run, not --quick")
     repeats = args.repeats if args.repeats is not None else (1 if quick else 3)
     if repeats < 1:
-        ap.error(f"--repeats must be >= 1, got {repeats}")
+        rep.error(f"--repeats must be >= 1, got {repeats}")
     single_steps = 1000 if quick else 20_000
-    lines = ["# Throughput of penny_env", "",
-             f"- machine: {platform.platform()}, CPU: {cpu_model()} ({os.cpu_count()} logical cores)",
-             f"- Python {platform.python_version()}, numpy {np.__version__}, gymnasium {gym.__version__}, "
-             f"numba {_numba_version()}",
-             f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
-             f"- command: `python -m devtools.throughput{' ' + ' '.join(shlex.quote(a) for a in argv) if argv else ''}`",
-             load_line(), stamp_line("docs/throughput.md"),
+    lines = rep.header("Throughput of penny_env")[:-1] + [
+             f"- gymnasium {gym.__version__}, numba {_numba_version()}",
              f"- every rate: the best of {repeats} run(s), for every env alike",
              "", "## Single environment (gymnasium.make, random actions, resets included)", "",
              "| env | us/step | steps/s | vs Pendulum-v1 (time ratio) | impacts/step |", "| --- | ---: | ---: | ---: | ---: |"]
@@ -185,11 +172,10 @@ def main(argv: list[str] | None = None) -> str:
     lines += ["", "## Targets, from the numbers above", ""] + _targets(rows, pend, big)
     report = "\n".join(lines) + "\n"
     if args.readme:
-        update_readme(args.readme, lines)
-    if args.out:
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-        with open(args.out, "w") as f:
-            f.write(report)
+        start, end = "<!-- throughput:start -->", "<!-- throughput:end -->"
+        if not rep.readme(args.readme, start, end, "\n".join(readme_summary(lines)).rstrip()):
+            raise ValueError(f"{args.readme}: no {start} ... {end} block to replace")
+    rep.write(report)
     return report
 
 
@@ -219,12 +205,6 @@ def readme_summary(lines: list[str]) -> list[str]:
     return head + ["", "Targets met or not, from the tables of [docs/throughput.md](docs/throughput.md):", ""] + targets
 
 
-def update_readme(path: str, lines: list[str]) -> None:
-    """Put the report's summary (readme_summary) between the README's markers."""
-    from studies.common import replace_block
-    start, end = "<!-- throughput:start -->", "<!-- throughput:end -->"
-    if not replace_block(path, start, end, "\n".join(readme_summary(lines)).rstrip()):
-        raise ValueError(f"{path}: no {start} ... {end} block to replace")
 
 if __name__ == "__main__":
     main()

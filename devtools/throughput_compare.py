@@ -17,21 +17,18 @@ the ratio within a round (the two trees measured back to back, in the same order
 measurement whose ratio of either kind shows a loss of more than ``--tolerance`` (default 5%).
 
 ``--busy``: one spinning Python process runs beside the whole measurement (a learner's core, as users
-train beside the env; devtools.contention compares threading setups that way); the report's
-sources line is then that of docs/throughput_compare_busy.md (provenance.REPORTS).
+train beside the env; devtools.contention compares threading setups that way); docs/throughput_compare_busy.md
+is that report.
 
 ``--quick`` (tests): one round, two ids, N <= 16, few steps, and the report goes to a temporary directory
-unless ``--out`` is given.
+unless ``--out`` is given (never docs/).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import os
-import platform
 import random
-import shlex
 import statistics
 import subprocess
 import sys
@@ -125,15 +122,11 @@ def speed_ratios(runs: dict, kind: str) -> dict:
     return out
 
 
-def main(argv: list[str] | None = None) -> str:
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def _options(ap) -> None:
     ap.add_argument("--before", help="source tree measured first in each round (the old code)")
     ap.add_argument("--after", help="source tree measured second in each round (the new code)")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--tolerance", type=float, default=0.05, help="a loss beyond this share is listed")
-    ap.add_argument("--out", default=None, help="Markdown report (default: a temporary directory)")
-    ap.add_argument("--quick", action="store_true")
     ap.add_argument("--busy", action="store_true", help="one spinning Python process beside the measurement")
     ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                     help="wall: time.perf_counter; cpu: time.process_time (all of the process's threads: steadier on a "
@@ -145,26 +138,38 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--single-steps", type=int, default=None)
     ap.add_argument("--vector-budget", type=int, default=None,
                     help="env-steps per vector measurement (3 to 4000 steps of the vector env)")
-    args = ap.parse_args(argv)
-    if not args.worker:  # (a worker imports only its own tree, which may have no studies/)
-        from studies.common import refuse_quick_into_docs
-        refuse_quick_into_docs(args.out, args.quick)
+
+
+def main(argv: list[str] | None = None) -> str:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--worker" in argv:  # a worker runs this file against another source tree, which may have no lab/
+        ap = argparse.ArgumentParser()
+        ap.add_argument("--quick", action="store_true")
+        ap.add_argument("--out")
+        _options(ap)
+        args = ap.parse_args(argv)
+        rep = None
+    else:
+        from lab.common import report_command
+        rep = report_command("devtools.throughput_compare", "throughput_compare.md", __doc__.split("\n")[0], argv,
+                             options=_options, quick="one round, two ids, N <= 16, few steps (tests)")
+        args = rep.args
     if args.quick:
         args.rounds, args.ids = 1, args.ids or list(QUICK_IDS)
     args.sizes = args.sizes or ([1, 16] if args.quick else list(SIZES))
     args.single_steps = args.single_steps or (300 if args.quick else 20_000)
     args.vector_budget = args.vector_budget or (2_000 if args.quick else 1_200_000)
-    if args.worker:
+    if rep is None:
         print(json.dumps(_worker(args)))
         return ""
     if not args.before or not args.after:
-        ap.error("--before and --after are required")
+        rep.error("--before and --after are required")
     for name in ("before", "after"):
         tree = getattr(args, name)
         if not os.path.isdir(os.path.join(tree, "penny_env")):
-            ap.error(f"--{name}: {tree!r} holds no penny_env package")
+            rep.error(f"--{name}: {tree!r} holds no penny_env package")
     if args.rounds < 1:
-        ap.error(f"--rounds must be >= 1, got {args.rounds}")
+        rep.error(f"--rounds must be >= 1, got {args.rounds}")
     runs = {"before": [], "after": []}
     spinner = subprocess.Popen([sys.executable, "-c", "while True:\n    pass\n"]) if args.busy else None
     try:
@@ -177,15 +182,7 @@ def main(argv: list[str] | None = None) -> str:
             spinner.kill()
             spinner.wait()
     single, vector = speed_ratios(runs, "single"), speed_ratios(runs, "vector")
-    cmd = "python -m devtools.throughput_compare " + " ".join(shlex.quote(a) for a in argv)
-    # (imported here: the workers run this file against other source trees, which may lack these)
-    from studies.common import load_line
-    from studies.provenance import stamp_line
-    lines = ["# Throughput before and after a change, side by side", "",
-             f"- machine: {platform.platform()}, {os.cpu_count()} logical cores, Python {platform.python_version()}",
-             f"- date: {_dt.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
-             f"- command: `{cmd}`", load_line(),
-             stamp_line("docs/throughput_compare_busy.md" if args.busy else "docs/throughput_compare.md"),
+    lines = rep.header("Throughput before and after a change, side by side") + [
              "- beside: " + ("one spinning Python process for the whole run (a learner's core)" if args.busy
                              else "nothing added (the machine as it was)"),
              f"- before: `{args.before}`, after: `{args.after}`; {args.rounds} alternating round(s), each in its own "
@@ -216,12 +213,7 @@ def main(argv: list[str] | None = None) -> str:
               f"{min(r[3] for r in rows):.3f}, max {max(r[3] for r in rows):.3f}",
               f"- losses beyond {args.tolerance:.0%} (by either ratio): " + ("none" if not losses else "; ".join(losses))]
     report = "\n".join(lines) + "\n"
-    out = args.out or os.path.join(tempfile.mkdtemp(prefix="penny_throughput_compare_"), "throughput_compare.md")
-    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    with open(out, "w") as f:
-        f.write(report)
-    print(report)
-    print(f"report written to {out}")
+    rep.write(report, echo=True)
     return report
 
 

@@ -19,7 +19,7 @@ sequence, timed with a synchronization at each end:
 * env + policy: env.step and, per step, the inference of a 64x64 tanh MLP policy on the step's observation (its
   actions written to a rollout buffer; the env steps the sequence's actions, so that its work is the other columns');
 * env + PPO: a rollout of the window (the policy's log-probabilities and values of the sequence's actions, the
-  env's step, the buffer's writes), then GAE and a PPO update (training.ppo_torch: 4 epochs of 4 minibatches)
+  env's step, the buffer's writes), then GAE and a PPO update (PolicyColumns: 4 epochs of 4 minibatches)
   on it, per env-step of the rollout;
 * the CPU backend (numba, every core of the machine) from the same state, on the same actions;
 * ``--variants``: the kernels alone of the step built other ways (one kernel; the split step without a register
@@ -33,12 +33,11 @@ differ from the CPU's in the last bits, docs/gpu.md). Every row names its window
 Without a GPU the command says so and writes no report; ``--quick`` runs the whole table under numba's CUDA
 simulator at tiny N (NUMBA_ENABLE_CUDASIM=1: numba device arrays instead of torch tensors on the GPU, the policy
 and PPO columns on the CPU's torch, no graph replay), which the tests use: its numbers time nothing about a GPU.
-Targets (issue 38), steady window: env.step at least 1e9 env-steps/s on PennyReach-Ellipse-v0 and 5e8 on
+Targets, steady window: env.step at least 1e9 env-steps/s on PennyReach-Ellipse-v0 and 5e8 on
 PennyImpacts-Stadium-v0 at the best N, 1.2e7 at N = 4096, at least 0.8 of its own kernels alone.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -183,18 +182,28 @@ def rare_share(env, device: Device, state, acts, steps: int) -> float:
 
 
 class PolicyColumns:
-    """The policy of the env + policy and env + PPO columns: training.ppo_torch's Agent (64x64 tanh MLPs)."""
+    """The policy of the env + policy and env + PPO columns: a PPO agent of CleanRL's shape, written out here (the
+    tools measure the env beside an agent's work and import no agent): 64x64 tanh MLPs for the actions' mean and
+    the value, a state-independent log std, GAE, and PPO_EPOCHS epochs of PPO_MINIBATCHES clipped-objective
+    minibatch updates (Adam 3e-4, gradient norm 0.5), the work per step of the ladder's training.ppo_torch."""
 
     def __init__(self, device: Device, obs_dim: int, act_dim: int, n: int, steps: int, rollout: bool):
-        from training.ppo_torch import Agent, Args
         torch = device.torch
+        nn = torch.nn
         self.torch, self.device = torch, device
         torch.manual_seed(0)
-        self.agent = Agent(obs_dim, act_dim, (64, 64)).to(device.torch_device)
-        self.optimizer = torch.optim.Adam(self.agent.parameters(), lr=3e-4, eps=1e-5)
-        batch = steps * n
-        self.args = Args(num_envs=n, num_steps=steps, update_epochs=PPO_EPOCHS,
-                         minibatch_size=max(1, batch // PPO_MINIBATCHES))
+
+        def mlp(n_out, gain):
+            layers = [nn.Linear(obs_dim, 64), nn.Tanh(), nn.Linear(64, 64), nn.Tanh(), nn.Linear(64, n_out)]
+            for k, layer in enumerate(x for x in layers if isinstance(x, nn.Linear)):
+                nn.init.orthogonal_(layer.weight, gain if k == 2 else 2 ** 0.5)
+                nn.init.zeros_(layer.bias)
+            return nn.Sequential(*layers).to(device.torch_device)
+        self.mean, self.value = mlp(act_dim, 0.01), mlp(1, 1.0)
+        self.log_std = nn.Parameter(torch.zeros(1, act_dim, device=device.torch_device))
+        params = [*self.mean.parameters(), *self.value.parameters(), self.log_std]
+        self.params, self.optimizer = params, torch.optim.Adam(params, lr=3e-4, eps=1e-5)
+        self.minibatch = max(1, steps * n // PPO_MINIBATCHES)
         z = lambda *shape: torch.zeros(shape, device=device.torch_device)  # noqa: E731
         self.out = z(n, act_dim)
         if not rollout:
@@ -202,16 +211,20 @@ class PolicyColumns:
         self.obs, self.actions = z(steps, n, obs_dim), z(steps, n, act_dim)
         self.logprobs, self.values, self.rewards, self.dones = z(steps, n), z(steps, n), z(steps, n), z(steps, n)
 
+    def _logprob_value(self, x, a):
+        dist = self.torch.distributions.Normal(self.mean(x), self.log_std.exp())
+        return dist.log_prob(a).sum(-1), dist.entropy().sum(-1), self.value(x).squeeze(-1)
+
     def infer(self, obs):
         with self.torch.no_grad():
-            self.out.copy_(self.agent.act(self.device.to_torch(obs)))
+            self.out.copy_(self.mean(self.device.to_torch(obs)).clamp(-1.0, 1.0))
 
     def record(self, t, obs, acts_t):
         """The rollout's writes before step t: the observation, the sequence's action, its log-probability and value."""
         x = self.device.to_torch(obs)
         a = self.device.to_torch(acts_t) if self.device.sim else acts_t.float()
         with self.torch.no_grad():
-            _, logprob, _, value = self.agent.get_action_and_value(x, a)
+            logprob, _, value = self._logprob_value(x, a)
         self.obs[t].copy_(x)
         self.actions[t].copy_(a)
         self.logprobs[t].copy_(logprob)
@@ -222,16 +235,33 @@ class PolicyColumns:
         self.rewards[t].copy_(r)
         self.dones[t].copy_(self.torch.maximum(te, tu))
 
-    def update(self, last_obs):
-        from training.ppo_torch import compute_gae, ppo_update
+    def update(self, last_obs, gamma=0.99, lam=0.95, clip=0.2):
         torch = self.torch
-        with torch.no_grad():
-            next_value = self.agent.get_value(self.device.to_torch(last_obs))
-            valid = torch.ones_like(self.rewards)
-            adv, ret = compute_gae(self.rewards, self.values, self.dones, self.dones, valid, next_value, 0.99, 0.95)
+        with torch.no_grad():  # GAE, backwards over the window
+            adv = torch.zeros_like(self.rewards)
+            last = torch.zeros_like(self.rewards[0])
+            following = self.value(self.device.to_torch(last_obs)).squeeze(-1)
+            for t in reversed(range(self.rewards.shape[0])):
+                keep = 1.0 - self.dones[t]
+                last = self.rewards[t] + gamma * following * keep - self.values[t] + gamma * lam * keep * last
+                adv[t], following = last, self.values[t]
+            ret = adv + self.values
         d = self.obs.shape[-1]
-        ppo_update(self.agent, self.optimizer, self.obs.reshape(-1, d), self.actions.reshape(-1, self.actions.shape[-1]),
-                   self.logprobs.reshape(-1), adv.reshape(-1), ret.reshape(-1), self.args)
+        obs, acts = self.obs.reshape(-1, d), self.actions.reshape(-1, self.actions.shape[-1])
+        old, adv, ret = self.logprobs.reshape(-1), adv.reshape(-1), ret.reshape(-1)
+        for _ in range(PPO_EPOCHS):
+            order = torch.randperm(obs.shape[0], device=obs.device)
+            for mb in order.split(self.minibatch):
+                logprob, entropy, value = self._logprob_value(obs[mb], acts[mb])
+                ratio = (logprob - old[mb]).exp()
+                a = (adv[mb] - adv[mb].mean()) / (adv[mb].std() + 1e-8) if len(mb) > 1 else adv[mb]
+                loss = (torch.max(-a * ratio, -a * ratio.clamp(1 - clip, 1 + clip)).mean()
+                        + 0.5 * ((value - ret[mb]) ** 2).mean())
+                self.optimizer.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.params, 0.5)
+                self.optimizer.step()
+        return float(loss.detach())
 
 
 def columns(env_id, n, window, steady_after, device: Device, cpu: bool, ppo: bool, variants) -> list:
@@ -343,10 +373,9 @@ def fmt(v):
     return "-" if v is None else f"{v:,.0f}"
 
 
-def report(a, argv, name, results, sim) -> list:
+def report(a, rep, name, results, sim) -> list:
     from penny_env.backends.env import FAST_MAX_REGISTERS
-    from studies.common import header
-    lines = header("GPU throughput of the vector env, like for like", "devtools.throughput_gpu", argv)
+    lines = rep.header("GPU throughput of the vector env, like for like")
     lines += [f"- device: {name}; CPU backend (numba) on {os.cpu_count()} cores of the same machine", ""]
     if sim:
         lines += ["**Run under numba's CUDA simulator (`--quick`): these numbers time the simulator, nothing about a "
@@ -411,18 +440,11 @@ def report(a, argv, name, results, sim) -> list:
 
 
 def table(headers, rows):
-    from studies.common import table as t
+    from lab.common import table as t
     return t(headers, rows)
 
 
-def main(argv: list[str] | None = None) -> int:
-    from studies.common import report_path, write
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="tiny N and windows under numba's CUDA simulator where there "
-                    "is no GPU (a smoke run: the tests)")
-    ap.add_argument("--out", default=None, help="report path (default runs/reports/throughput_gpu.md; "
-                    "docs/throughput_gpu.md for the committed report)")
+def _options(ap) -> None:
     ap.add_argument("--ids", nargs="+", default=None, help=f"env ids (default {' '.join(IDS)})")
     ap.add_argument("--sizes", nargs="+", type=int, default=None, help=f"numbers of envs (default {SIZES})")
     ap.add_argument("--window", type=int, default=None, help=f"steps per window (default {WINDOW})")
@@ -436,7 +458,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cpu-sizes", nargs="+", type=int, default=None, help="the N of the CPU column (default: all)")
     ap.add_argument("--ppo-sizes", nargs="+", type=int, default=[4096, 65536, 1_048_576],
                     help="the N of the env + PPO column (default 4096 65536 1048576)")
-    a = ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from lab.common import report_command
+    rep = report_command("devtools.throughput_gpu", "throughput_gpu.md", __doc__.splitlines()[0], argv,
+                         options=_options, quick="tiny N and windows under numba's CUDA simulator where there is no "
+                         "GPU (a smoke run: the tests)")
+    a, argv, ap = rep.args, rep.argv, rep
     if any(n < 1 for n in (a.sizes or ())) or (a.window is not None and a.window < 1):  # (bad input first, GPU or not)
         ap.error("--sizes and --window must be positive")
     name = gpu_here()
@@ -462,7 +491,6 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--sizes and --window must be positive")
     device = Device(sim)
     variant_ids = a.variant_ids or ids[:1]
-    path = report_path(a.out, a.quick, "throughput_gpu.md")
     results = {}
     for env_id in ids:
         for n in sizes:
@@ -475,8 +503,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{env_id} N={n:,} {r['text']}: rare {100 * r['rare']:.2f} %, "
                       + ", ".join(f"{k} {v:,.0f}" for k, v in r.items() if isinstance(v, float) and k != "rare"
                                   and k != "bytes per env"), flush=True)
-            write(str(path), report(a, argv, name, results, sim))  # (after every row: a time limit keeps the rows done)
-    print(f"wrote {path}")
+            rep.write(report(a, rep, name, results, sim))  # (after every row: a time limit keeps the rows done)
     return 0
 
 

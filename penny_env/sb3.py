@@ -31,7 +31,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
@@ -66,12 +65,8 @@ class PennySB3VecEnv(VecEnv):
         self.goal_env = goal_env
         obs_space = venv.single_observation_space
         if goal_env:
-            if core.task.kind != "reach" or core.plane:
-                raise ValueError(f"goal_env=True needs a reach task on a table, got task {core.task.kind!r} on "
-                                 f"{'the open plane' if core.plane else 'a table'}")
-            self._L, self._tol = float(core.L), float(core.task.tolerance)
-            goal = spaces.Box(-2.0, 2.0, (2,), np.float32)
-            obs_space = spaces.Dict({"observation": obs_space, "achieved_goal": goal, "desired_goal": goal})
+            from .envs.goal_env import goal_setup
+            self._L, self._tol, obs_space = goal_setup(core, obs_space)
         self.render_mode = venv.render_mode
         super().__init__(venv.num_envs, obs_space, venv.single_action_space)
         self._actions = None

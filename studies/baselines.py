@@ -5,28 +5,20 @@ a task that these solve is not a control task.
 """
 from __future__ import annotations
 
-import argparse
-import sys
-
 import numpy as np
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--episodes", type=int, default=64)
-    ap.add_argument("--quick", action="store_true", help="4 episodes on two ids (for tests)")
-    ap.add_argument("--out", default=None,
-                    help="Markdown report (default: runs/reports/baselines.md under the working directory; "
-                    "--quick: a new temporary directory)")
-    args = ap.parse_args(argv)
+    from lab.common import report_command
+    rep = report_command("studies.baselines", "baselines.md", __doc__, argv, quick="4 episodes on two ids (for tests)",
+                         options=lambda ap: ap.add_argument("--episodes", type=int, default=64))
     import gymnasium as gym
     import penny_env  # noqa: F401
-    from studies.common import header, report_path
     from training.train import evaluate
 
     ids = sorted(k for k in gym.registry if k.startswith("Penny"))
-    episodes = 4 if args.quick else args.episodes
-    if args.quick:
+    episodes = 4 if rep.quick else rep.args.episodes
+    if rep.quick:
         ids = ids[:2]
     rows = []
     for eid in ids:
@@ -39,15 +31,10 @@ def main(argv=None):
         rows.append(f"| {eid} | {zero['success_rate']:.2f} | {zero['mean_return']:.2f} | "
                     f"{rand['success_rate']:.2f} | {rand['mean_return']:.2f} |")
         print(rows[-1], flush=True)
-    lines = header("Trivial policies on every environment id", "studies.baselines", argv or sys.argv[1:])
-    lines += [f"{episodes} episodes per policy and id, seeds from 123.", "",
-              "| id | zero: success | zero: return | random: success | random: return |",
-              "|---|---|---|---|---|", *rows, ""]
-    out = report_path(args.out, args.quick, "baselines.md")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines))
-    print(f"wrote {out}")
-    return out
+    return rep.write(rep.header("Trivial policies on every environment id")
+                     + [f"{episodes} episodes per policy and id, seeds from 123.", "",
+                        "| id | zero: success | zero: return | random: success | random: return |",
+                        "|---|---|---|---|---|", *rows])
 
 
 if __name__ == "__main__":

@@ -11,12 +11,10 @@ studies.matching). Target: >= 10x faster with >= 100x smaller impact-time error.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 
 import numpy as np
 
-from studies import common
+from lab import common
 from studies.integrators import run_simulate, solve_ivp_hybrid
 from studies.matching import match_impacts, unresolvable_mask
 from studies.reference import paper_scenes
@@ -160,15 +158,11 @@ def one_impact_errors(well_conditioned: float = 1e-5):
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description="penny_env vs solve_ivp (DOP853) on the paper's scenes")
-    ap.add_argument("--quick", action="store_true", help="fewer repeats")
-    ap.add_argument("--out", default=None, help="write a Markdown report here (e.g. docs/bench_solvers.md)")
-    args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
-    refuse_quick_into_docs(args.out, args.quick)
+    rep = common.report_command("studies.bench_solvers", "bench_solvers.md",
+                                "penny_env vs solve_ivp (DOP853) on the paper's scenes", argv, quick="fewer repeats")
+    args = rep.args
     rows = run(quick=args.quick)
-    lines = report(rows, argv)
+    lines = report(rows, rep.argv)
     lines += ["", "## One impact at a time", "",
               "Started from the reference's own post-impact state, the error of the next impact time (so that the "
               "dynamics do not amplify round-off along a chain); impacts with relative normal speed >= 1e-5.", "",
@@ -179,9 +173,7 @@ def main(argv=None):
         print(f"{r['scene']:16s} penny_env {1e3 * r['t_sim']:8.2f} ms  solve_ivp {1e3 * r['t_ivp']:8.2f} ms  "
               f"x{r['t_ivp'] / r['t_sim']:7.1f}  err (both found) {r['err_sim']:.2e} vs {r['err_ivp']:.2e}  "
               f"penny_env {r['m_sim'].summary()} | solve_ivp {r['m_ivp'].summary()}  target met: {_target(r)}")
-    if args.out:
-        common.write(args.out, lines)
-        print(f"wrote {args.out}")
+    rep.write(lines)
     return rows
 
 

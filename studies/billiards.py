@@ -23,8 +23,6 @@ is given.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 from dataclasses import dataclass, field
 
@@ -33,7 +31,7 @@ import numpy as np
 from penny_env import batch
 from penny_env.physics import PennyParams, make_law, make_table
 from penny_env.analysis import boundary_map as bm
-from studies.stats import clopper_pearson
+from lab.stats import clopper_pearson
 
 TABLES = {"circle": {"kind": "circle", "radius": 0.2},
           "ellipse": {"kind": "ellipse", "a": 0.15, "b": 0.2},
@@ -374,15 +372,10 @@ def _answer_block(out) -> list[str]:
 
 
 def main(argv=None):
-    from studies.common import fmt, header, report_path, table
+    from lab.common import fmt, header, report_command, table
 
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="few short orbits (for tests)")
-    ap.add_argument("--out", default=None,
-                    help="Markdown report, PNGs next to it (default: docs/billiards.md under the working "
-                    "directory; --quick: a new temporary directory)")
-    args = ap.parse_args(argv)
+    rep = report_command("studies.billiards", "billiards.md", __doc__, argv, quick="few short orbits (for tests)")
+    args, argv = rep.args, rep.argv
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -390,8 +383,7 @@ def main(argv=None):
     from penny_env.analysis.dynamics import lyapunov_exponents
 
     cfg = CONFIGS["quick" if args.quick else "full"]
-    out = report_path(args.out, args.quick, "billiards.md")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = rep.out
     params = PennyParams()
     rho = float(bm.metric_speed(PAPER_STATE, params))  # every orbit at the paper's energy
     t_start = time.perf_counter()
@@ -418,11 +410,7 @@ def main(argv=None):
     pngs = {}
 
     def save(fig, key, dpi=100):  # the dense figures at a lower resolution (about 0.3 MB each)
-        fig.tight_layout()
-        path = out.with_name(f"{out.stem}_{key}.png")
-        fig.savefig(path, dpi=dpi)
-        plt.close(fig)
-        pngs[key] = path.name
+        pngs[key] = rep.figure(fig, f"_{key}.png", dpi=dpi).name
 
     for key, coord, label, ylim in (("beta", 1, "beta [rad]", (-np.pi / 2, np.pi / 2)),
                                     ("psi", 2, "psi [rad]", (-np.pi, np.pi))):
@@ -579,11 +567,11 @@ def main(argv=None):
             last = int(np.flatnonzero(valid)[-1])
             fig5_rows.append([t, law, *(f"{fmt(sp[k], 2)} ({fmt(lin[k], 2)})" for k in at),
                               fmt(growth[last] / times[last], 3) if last else "-", fmt(times[last], 3)])
-    return _write(out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons, vol, spec, flow_spec, push_rows,
+    return _write(rep, out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons, vol, spec, flow_spec, push_rows,
                   erg_rows, fig5_rows, summary, notes, rolling_share, table, fmt, header, answer_lines)
 
 
-def _write(out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons, vol, spec, flow_spec, push_rows,
+def _write(rep, out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons, vol, spec, flow_spec, push_rows,
            erg_rows, fig5_rows, summary, notes, rolling_share, table, fmt, header, answer_lines):
     lines = header("The penny as a nonholonomic billiard", "studies.billiards", argv)
     lines += [
@@ -759,10 +747,7 @@ def _write(out, argv, args, cfg, params, rho, compute_s, pngs, orbit_rows, cons,
                       f"at {cfg['fig5_t']:g} s [m]", "finite-time exponent [1/s]", "up to [s]"], fig5_rows), "",
               *[n for n in notes if n.startswith("For ")], "",
               f"![Figure 5 extended]({pngs['figure5']})", ""]
-    out.write_text("\n".join(lines))
-    print("\n".join(lines))
-    print(f"wrote {out}")
-    return out
+    return rep.write(lines, echo=True)
 
 
 if __name__ == "__main__":

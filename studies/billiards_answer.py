@@ -25,10 +25,8 @@ docs/billiards.md (between the question2-answer markers).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -248,7 +246,7 @@ def fate(tname, law, cfg, params, rho, seed):
 # -- the answer ------------------------------------------------------------------------------------------------
 def summarise(res, cfg) -> dict:
     """The numbers the answer quotes, from the raw results."""
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
 
     s = {"impacts": cfg["impacts"], "tables": {}}
     n_max = max(n for n in cfg["checkpoints"] if n <= cfg["impacts"])
@@ -400,13 +398,6 @@ def _span(r):
     return f"{r[0]:.2f} to {r[1]:.2f}" if r else "-"
 
 
-def update_block(path: Path, block: str) -> bool:
-    """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
-    the block) rewritten; False where the file has none (studies/common.replace_block)."""
-    from studies.common import replace_block
-    return replace_block(path, README_BEGIN, README_END, block)
-
-
 # -- the report ------------------------------------------------------------------------------------------------
 def run(cfg, params, rho):
     res = {"lyapunov": {}, "kac": {}, "sinai": {}, "periodic": {}, "slices": {}, "slice_summary": {}, "fate": {}}
@@ -501,11 +492,11 @@ def plots(res, s, out, cfg):
     return names
 
 
-def write_report(res, s, out, argv, cfg, seconds):
-    from studies.common import header, table
+def write_report(rep, res, s, cfg, seconds):
+    from lab.common import table
 
-    names = plots(res, s, out, cfg)
-    lines = header("The penny's billiard: the answer to question 2 per law", "studies.billiards_answer", argv)
+    names = plots(res, s, rep.out, cfg)
+    lines = rep.header("The penny's billiard: the answer to question 2 per law")
     lines += [f"Compute time {seconds:.0f} s. Penny: the paper's, no torques, at the paper's energy; tables "
               + ", ".join(f"{t} `{v}`" for t, v in TABLES.items()) + ". Coordinates and the boundary map: "
               "[billiards.md](billiards.md) (s: arc length over the perimeter; beta: incidence; psi: spin ratio; "
@@ -616,7 +607,7 @@ def write_report(res, s, out, argv, cfg, seconds):
                       "finite-time lambda1 range"], frow), "",
               f"![fate]({names['fate']})", "",
               "## 8. Related work", "", *RELATED, ""]
-    out.write_text("\n".join(lines))
+    rep.write(lines)
     return names
 
 
@@ -738,34 +729,23 @@ RELATED = [
 
 
 def main(argv=None):
-    from studies.common import command_line, report_path  # noqa: F401
+    from lab.common import report_command
 
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="few short orbits (for the tests), into a temporary folder")
-    ap.add_argument("--out", default=None, help="Markdown report (default docs/billiards_answer.md under the working "
-                    "directory for a full run; --quick: a new temporary folder)")
-    args = ap.parse_args(argv)
-    cfg = CONFIGS["quick" if args.quick else "full"]
-    if args.quick:
-        out = report_path(args.out, True, "billiards_answer.md")
-        if out.parent.resolve() == (ROOT / "docs").resolve():
-            ap.error("--quick never writes into docs/; give another --out")
-    else:
-        out = Path(args.out).resolve() if args.out else (Path("docs") / "billiards_answer.md").resolve()
-    out.parent.mkdir(parents=True, exist_ok=True)
+    rep = report_command("studies.billiards_answer", "billiards_answer.md", __doc__, argv, docs_default=True,
+                         quick="few short orbits (for the tests)")
+    cfg = CONFIGS["quick" if rep.quick else "full"]
+    out = rep.out
     params = PennyParams()
     rho = float(bm.metric_speed(PAPER_STATE, params))
     t0 = time.perf_counter()
     res = run(cfg, params, rho)
     s = summarise(res, cfg)
     seconds = time.perf_counter() - t0
-    write_report(res, s, out, argv, cfg, seconds)
-    out.with_suffix(".json").write_text(json.dumps(s, indent=1, default=float))
-    print(f"wrote {out}")
-    if not args.quick and out == (ROOT / "docs" / "billiards_answer.md").resolve():
+    write_report(rep, res, s, cfg, seconds)
+    rep.beside(".json").write_text(json.dumps(s, indent=1, default=float))
+    if not rep.quick and out == (ROOT / "docs" / "billiards_answer.md").resolve():
         for path, base in ((ROOT / "README.md", "docs/"), (ROOT / "docs" / "billiards.md", "")):
-            if update_block(path, answer_block(s, base)):
+            if rep.readme(path, README_BEGIN, README_END, answer_block(s, base)):
                 print(f"{path.name}: the question-2 answer updated")
     return out, s
 

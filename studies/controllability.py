@@ -19,8 +19,6 @@ what is reachable (a lower bound on the reachable set); the plane's invariant sh
 """
 from __future__ import annotations
 
-import argparse
-import sys
 
 import numpy as np
 
@@ -40,7 +38,7 @@ START = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])  # the paper's initial s
 def study(samples: int, horizons, seed: int = 0, progress: bool = True) -> list[dict]:
     """One row per (actuation, scene, horizon): the range of the unactuated speed over the sampled
     reachable set, the share of sequences with impacts, and the final speeds."""
-    from studies.common import progress as progress_bar
+    from lab.common import progress as progress_bar
     from penny_env.analysis.dynamics import reachable_set
 
     jobs = [(act, scene, T) for act in UNACTUATED for scene in SCENES for T in horizons]
@@ -74,28 +72,22 @@ def verdicts(rows) -> list[str]:
 
 
 def main(argv=None):
-    from studies.common import header, report_path
+    from lab.common import report_command
 
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="few samples and one short horizon (for tests)")
-    ap.add_argument("--samples", type=int, default=2000, help="control sequences per reachable set")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default=None,
-                    help="Markdown report, PNGs next to it (default: runs/reports/controllability.md under the working "
-                    "directory; --quick: a new temporary directory)")
-    args = ap.parse_args(argv)
+    def options(ap):
+        ap.add_argument("--samples", type=int, default=2000, help="control sequences per reachable set")
+        ap.add_argument("--seed", type=int, default=0)
+    rep = report_command("studies.controllability", "controllability.md", __doc__, argv, options=options,
+                         quick="few samples and one short horizon (for tests)")
+    args = rep.args
     if args.samples < 1:
-        ap.error(f"--samples must be >= 1, got {args.samples}")
+        rep.error(f"--samples must be >= 1, got {args.samples}")
     samples = 50 if args.quick else args.samples
     horizons = (1.0,) if args.quick else (1.0, 3.0, 10.0)
     rows = study(samples, horizons, args.seed, progress=not args.quick)
 
-    out = report_path(args.out, args.quick, "controllability.md")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    png = out.with_name(out.stem + ".png")
-    _plot(rows, max(horizons), png)
-    lines = header("Does controllability of the penny need impacts?", "studies.controllability", argv)
+    png = rep.figure(_plot(rows, max(horizons)), ".png", rect=(0, 0.1, 1, 1))
+    lines = rep.header("Does controllability of the penny need impacts?")
     lines += [__doc__.split("\n\n", 2)[2].strip(), "",
               "## What the samples show", "", *verdicts(rows), "",
               f"## Unactuated speed over the sampled reachable sets ({samples} control sequences each)", "",
@@ -115,13 +107,11 @@ def main(argv=None):
               "- With both controls the penny is controllable without impacts (the classical rolling disk); "
               "impacts are needed only when one control is missing. Whether every state of a table is "
               "reachable with one control and impacts (full controllability) is not settled by sampling.", ""]
-    out.write_text("\n".join(lines))
-    print("\n".join(lines))
-    print(f"wrote {out} and {png}")
+    rep.write(lines, echo=True)
     return rows
 
 
-def _plot(rows, horizon, path):
+def _plot(rows, horizon):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -144,9 +134,7 @@ def _plot(rows, horizon, path):
             handle.set_alpha(1.0)
         else:
             handle.set_markersize(9)
-    fig.tight_layout(rect=(0, 0.1, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 if __name__ == "__main__":

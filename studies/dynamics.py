@@ -4,9 +4,6 @@
 """
 from __future__ import annotations
 
-import argparse
-import sys
-
 import numpy as np
 
 from penny_env.analysis.dynamics import _initial_states, lyapunov_exponents, reachable_set
@@ -18,15 +15,9 @@ TABLES = {"circle r = 0.2": {"kind": "circle", "radius": 0.2},
 
 
 def main(argv=None):
-    from studies.common import header, report_path
-
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="few pennies, short times (for tests)")
-    ap.add_argument("--out", default=None,
-                    help="Markdown report, PNGs next to it (default: runs/reports/dynamics.md under the working "
-                    "directory; --quick: a new temporary directory)")
-    args = ap.parse_args(argv)
+    from lab.common import report_command
+    rep = report_command("studies.dynamics", "dynamics.md", __doc__, argv, quick="few pennies, short times (for tests)")
+    args = rep.args
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -45,8 +36,6 @@ def main(argv=None):
         rows.append(f"| {name} | {n} | {t_final:g} | {e.size} | {q[0]:.3f} | {q[1]:.3f} | {q[2]:.3f} |")
         print(rows[-1], flush=True)
 
-    out = report_path(args.out, args.quick, "dynamics.md")
-    out.parent.mkdir(parents=True, exist_ok=True)
     start = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
     table = TABLES["ellipse 0.15 x 0.2 (paper)"]
     fig, axes = plt.subplots(1, 3, figsize=(12, 4.2))
@@ -67,12 +56,9 @@ def main(argv=None):
         ax.set_title(f"{act}: {samples} random bang-bang controls, t = 1 s", fontsize=8)
         cb = fig.colorbar(sc, ax=ax, shrink=0.7, label="impacts in the 1 s")
         cb.set_ticks(np.arange(0, top + 1, max(1, (top + 1) // 8)))
-    fig.tight_layout()
-    png = out.with_name(out.stem + "_reachable.png")
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    png = rep.figure(fig, "_reachable.png")
 
-    lines = header("Dynamics: Lyapunov exponents and reachable sets", "studies.dynamics", argv)
+    lines = rep.header("Dynamics: Lyapunov exponents and reachable sets")
     lines += ["Finite-time largest Lyapunov exponents of the free penny (no torques, elastic impacts), from "
               "`penny_env.analysis.dynamics.lyapunov_exponents`: each penny and a copy whose angular speeds "
               "differ by 1e-10 (relative) are simulated together; the exponent is the slope of log distance "
@@ -86,10 +72,7 @@ def main(argv=None):
               "(x = y = theta = 0, phi = pi/2, theta_dot = 10, phi_dot = 0.2) in the paper's ellipse under random "
               "bang-bang torques (u1 = 6.25e-7, u2 = 1.5e-5 N m, switching every 0.05 s), coloured by the number "
               "of impacts.", "", f"![reachable sets]({png.name})", ""]
-    out.write_text("\n".join(lines))
-    print("\n".join(lines))
-    print(f"wrote {out} and {png}")
-    return out
+    return rep.write(lines, echo=True)
 
 
 if __name__ == "__main__":

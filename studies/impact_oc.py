@@ -60,19 +60,17 @@ no impact can happen there and both variants are the same problem.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import pickle
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 import penny_env as pe
-from studies.optimal_control import (EFFORT_ROWS, DEFAULT_MARGIN, Problem, Solution, dense_clearance, scene_table,
-                                      solve_rows)
+from studies.optimal_control import (EFFORT_ROWS, DEFAULT_MARGIN, Problem, Solution, dense_clearance, draw_plans,
+                                      scene_table, solve_rows)
 
 SCENES = ("ellipse", "stadium")
 ACTUATIONS = ("both", "steer", "drive")
@@ -589,7 +587,7 @@ def _progress(rows, progress):
 
 def summarise(rows, margin=MARGIN):
     """Per (actuation, objective), pooled over the tables, and per table: the counts of the report."""
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
 
     out = []
     keys = []
@@ -651,13 +649,15 @@ README_BEGIN = "<!-- oc-answer: written by python -m studies.impact_oc -->"
 README_END = "<!-- /oc-answer -->"
 
 
+def overall(summary) -> list:
+    """(row, interval's low, high) of the summary's rows over all tables."""
+    return [(s, *s["ci"]) for s in summary if s["scene"] == "all"]
+
+
 def readme_block(summary, margin=MARGIN) -> str:
     """The README's answer: per actuation and objective the paying, failed and certified counts (from the summary)."""
     bits = []
-    for s in summary:
-        if s["scene"] != "all":
-            continue
-        lo, hi = s["ci"]
+    for s, lo, hi in overall(summary):
         if s["actuation"] == "steer":
             bits.append(f"steer-only park: no impact-free plan exists (theorem T2), a plan with impacts was found in "
                         f"{s['feasible_with']}/{s['pairs']} pairs (feasibility, not optimality)")
@@ -677,19 +677,9 @@ def readme_block(summary, margin=MARGIN) -> str:
             "with impacts exists, not that none without does, and no plan with impacts is shown optimal.")
 
 
-def update_readme(path: Path, block: str) -> bool:
-    """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
-    the block) rewritten; False where the file has none (studies/common.replace_block)."""
-    from studies.common import replace_block
-    return replace_block(path, README_BEGIN, README_END, block)
-
-
 def answer(summary, margin=MARGIN) -> list[str]:
     lines = []
-    for s in summary:
-        if s["scene"] != "all":
-            continue
-        lo, hi = s["ci"]
+    for s, lo, hi in overall(summary):
         if s["actuation"] == "steer":
             lines.append(
                 f"- {LABEL[s['actuation']].capitalize()}, minimum {s['objective']}: feasibility, not optimality. No "
@@ -763,21 +753,9 @@ def plot_examples(rows, path, n=4):
         return False
     fig, axes = plt.subplots(1, len(picks), figsize=(4 * len(picks), 4.4), squeeze=False)
     for ax, r in zip(axes[0], picks):
-        wall = scene_table(r["scene"]).boundary(256)
-        ax.plot(wall[:, 0], wall[:, 1], "k-", lw=1)
         ob = r["objective"]
-        for key, style in (("with", "C0-"), ("without", "C1--")):
-            sol = r[key]
-            if sol.traj is None:
-                continue
-            t = np.linspace(0.0, sol.traj.final_time, 600)
-            p = sol.traj.states_at(t)
-            ax.plot(p[:, 0], p[:, 1], style, lw=1.2,
-                    label=f"impacts {'allowed' if key == 'with' else 'forbidden'}: {value(sol, ob):.3g}"
-                          f"{' s' if ob == 'time' else ''}")
-            if sol.traj.n_impacts:
-                q = sol.traj.impact_states
-                ax.plot(q[:, 0], q[:, 1], "rx", ms=7)
+        draw_plans(ax, r, 600, lambda key, sol: f"impacts {'allowed' if key == 'with' else 'forbidden'}: "
+                                                f"{value(sol, ob):.3g}{' s' if ob == 'time' else ''}")
         s = r["start"]
         ax.annotate("", xy=(s[0] + 0.01 * math.cos(s[3]), s[1] + 0.01 * math.sin(s[3])), xytext=(s[0], s[1]),
                     arrowprops=dict(arrowstyle="->", color="g"))
@@ -797,11 +775,14 @@ def plot_examples(rows, path, n=4):
     return True
 
 
-def write_report(rows, out, argv, seconds, meta):
-    from studies.common import header
+def write_report(rep, rows, argv, seconds, meta):
+    """The report (rep.out; its figure and certificates beside it) from the solved rows; argv: the command line of
+    the run that solved them (a --report-only rewrite keeps it)."""
+    from lab.common import header
 
+    out = rep.out
     summary = summarise(rows)
-    png = out.with_name(out.stem + "_impacts.png")
+    png = rep.beside("_impacts.png")
     has_png = plot_examples(rows, png)
     n_pairs = meta["pairs"]
     lines = header("Optimal control where impacts can pay", "studies.impact_oc", argv)
@@ -917,7 +898,7 @@ def write_report(rows, out, argv, seconds, meta):
               "they count as paying only where the plan with impacts hits the wall.",
               "- Laws other than elastic (the probes' plastic and e = 0.5 walls) and the circle and rounded "
               "rectangle tables are not run here."]
-    out.write_text("\n".join(lines) + "\n")
+    rep.write(lines)
     write_certificates(rows, out.with_name(out.stem + "_certificates.json"))
     return summary
 
@@ -944,23 +925,22 @@ def write_certificates(rows, path):
 
 
 def main(argv=None):
-    argv = list(sys.argv[1:] if argv is None else argv)
-    ap = argparse.ArgumentParser(prog="python -m studies.impact_oc", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true",
-                    help="1 ellipse pair, every actuation, short horizons, into a temporary folder (never docs/)")
-    ap.add_argument("--pairs", type=int, default=10, help="pairs per table (default 10)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--actuations", nargs="+", default=list(ACTUATIONS), help="subset of both steer drive")
-    ap.add_argument("--scenes", nargs="+", default=list(SCENES), help="tables: subset of ellipse stadium")
-    ap.add_argument("--out", type=Path, default=None, help="report (default docs/optimal_control.md; --quick: a "
-                                                          "temporary folder)")
-    ap.add_argument("--runs", type=Path, default=None, help="where the solved rows are saved (default runs/impact_oc; "
-                                                           "--quick: beside the report)")
-    ap.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
-    ap.add_argument("--recertify", action="store_true", help="replay the committed certificates "
-                    "(docs/optimal_control_certificates.json) with the margin rule and rewrite them (minutes)")
-    args = ap.parse_args(argv)
+    from lab.common import report_command
+
+    def options(ap):
+        ap.add_argument("--pairs", type=int, default=10, help="pairs per table (default 10)")
+        ap.add_argument("--seed", type=int, default=0)
+        ap.add_argument("--workers", type=int, default=1)
+        ap.add_argument("--actuations", nargs="+", default=list(ACTUATIONS), help="subset of both steer drive")
+        ap.add_argument("--scenes", nargs="+", default=list(SCENES), help="tables: subset of ellipse stadium")
+        ap.add_argument("--runs", type=Path, default=None, help="where the solved rows are saved (default "
+                        "runs/impact_oc; --quick: beside the report)")
+        ap.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
+        ap.add_argument("--recertify", action="store_true", help="replay the committed certificates "
+                        "(docs/optimal_control_certificates.json) with the margin rule and rewrite them (minutes)")
+    rep = report_command("studies.impact_oc", "optimal_control.md", __doc__.split("\n\n")[0], argv, options=options,
+                         docs_default=True, quick="1 ellipse pair, every actuation, short horizons")
+    args, argv, out = rep.args, rep.argv, rep.out
     if args.recertify:
         path = ROOT / "docs" / "optimal_control_certificates.json"
         certs = recertify(path)
@@ -981,13 +961,9 @@ def main(argv=None):
         raise SystemExit(str(exc)) from None
     docs = ROOT / "docs"
     if args.quick:
-        out = args.out or Path(tempfile.mkdtemp(prefix="impact_oc_")) / "optimal_control.md"
-        if out.resolve().parent == docs.resolve():
-            raise SystemExit("--quick never writes into docs/")
         settings = dict(n_pairs=1, scenes=("ellipse",), horizon={"both": 30, "drive": 60, "steer": 80}, maxiter=40,
                         random_starts=0, budget=2, objectives=("time",))
     else:
-        out = args.out or docs / "optimal_control.md"
         settings = dict(n_pairs=args.pairs, scenes=tuple(args.scenes))
     runs = args.runs or (out.parent if args.quick else ROOT / "runs" / "impact_oc")
     saved = runs / "rows.pkl"
@@ -1007,11 +983,9 @@ def main(argv=None):
         runs.mkdir(parents=True, exist_ok=True)
         with open(saved, "wb") as f:
             pickle.dump((rows, seconds, meta, argv), f)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    summary = write_report(rows, out, argv, seconds, meta)
-    print(f"wrote {out}")
+    summary = write_report(rep, rows, argv, seconds, meta)
     if not args.quick and out.resolve() == (docs / "optimal_control.md").resolve():
-        if update_readme(ROOT / "README.md", readme_block(summary)):
+        if rep.readme(ROOT / "README.md", README_BEGIN, README_END, readme_block(summary)):
             print("README.md: the optimal-control answer updated")
     return out
 

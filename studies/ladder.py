@@ -15,13 +15,13 @@ Go-Explore: they reset their training envs to chosen states, and learn from cert
 training seeds, never of the pair seeds) are labelled so in every table and figure.
 
 Each job writes RUNS/<agent>/<cell>/seed<k>/ and, last, result.json; a rerun skips the jobs that have one made by the
-same job config (studies/jobs.py), so an interruption costs at most the job under way (each is under an hour on
+same job config (lab/jobs.py), so an interruption costs at most the job under way (each is under an hour on
 one core at the committed budgets). --ray runs the jobs as Ray tasks (RAY_ADDRESS or a local instance).
 Demonstrations for the privileged agents are made first, once per cell (RUNS/demos/<cell>.npz).
 
 The report (--out; default docs/ladder.md, with docs/ladder.csv and the figures docs/ladder_<cell>.png beside it):
 per cell, every agent's success at its budget with a 95 % interval clustered by seed (honest at 0 and 1:
-studies/stats.seed_clustered_ci) beside the witnessed rate of the same pair seeds (docs/witnesses_pairs.csv), the
+lab/stats.seed_clustered_ci) beside the witnessed rate of the same pair seeds (docs/witnesses_pairs.csv), the
 impacts per successful episode and a check that every single-input success had at least one impact (the theorems
 say it must: a success without one stops the report as a bug), the rise of the success rate over the last decade
 of samples, and the issue's goals checked from the table. One CSV row per (agent, privileged, probe, table, law,
@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from studies.cells import PROBE_TASKS, TABLE_NAMES, cell_spec
-from studies.jobs import check_ray, finished, result_of, run_jobs
+from lab.jobs import check_ray, finished, result_of, run_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -310,7 +310,7 @@ def witnessed_by_seed(cell, n: int, pairs_csv=DOCS / "witnesses_pairs.csv") -> n
 
 def load_results(cfg, jobs, runs) -> tuple[dict, list]:
     """({(agent, cell tuple): [result of each seed that finished]}, [folders holding a stale result]): only results
-    made by the config's own jobs count (studies/jobs.result_of); a damaged result.json stops the report, named."""
+    made by the config's own jobs count (lab/jobs.result_of); a damaged result.json stops the report, named."""
     out, stale = {}, []
     for job in jobs:
         result = result_of(runs, job, job_dir)
@@ -369,7 +369,7 @@ def summarize(cfg, results) -> list[dict]:
     """One row per (cell, agent): pooled success with its seed-clustered interval, each seed's rate and their
     minimum, the witnessed rate of the same pair seeds, the shares, impacts per success, successes without an impact,
     the last decade's rise, and (agents that keep a best-validated snapshot) each seed's final policy."""
-    from studies.stats import seed_clustered_ci
+    from lab.stats import seed_clustered_ci
     out = []
     for cell in cfg["cells"]:
         wit = witnessed_by_seed(cell, cfg["eval_seeds"])
@@ -624,7 +624,7 @@ def archive_rows(cells, path=DOCS / "ladder_archive.csv") -> dict:
 
 
 def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) -> Path:
-    from studies.common import header
+    from lab.common import header
     results, stale = load_results(cfg, jobs, runs)
     summary = summarize(cfg, results)
     archived = archive_rows(cfg["cells"])
@@ -750,7 +750,7 @@ def write_figures(cfg, results, out: Path) -> dict:
 
 def write_readme(sentences) -> None:
     """The README's ladder block, between its markers (written only by a run that writes docs/ladder.md)."""
-    from studies.common import replace_block
+    from lab.common import replace_block
     replace_block(ROOT / "README.md", README_BEGIN, README_END, "\n\n".join(sentences))
 
 
@@ -783,7 +783,7 @@ def main(argv=None):
         ap.error(str(exc))
     jobs = make_jobs(cfg)
     t0 = time.perf_counter()
-    from studies.jobs import DamagedResult
+    from lab.jobs import DamagedResult
     from training.run_folder import RunFolderError, run_lock
     try:
         if not args.report_only:

@@ -20,9 +20,7 @@ standard error (SE) of the report's own estimate:
 """
 from __future__ import annotations
 
-import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -80,12 +78,11 @@ def study(orbits, copies, impacts):
     return rows
 
 
-def report(rows, argv, seconds, quick):
-    from studies.common import header
-
+def report(rows, rep, seconds):
     z = [d for r in rows for d in r["copies"]]
     below = sum(d < 0 for d in z)
-    lines = header("Two correct computations of lambda1: how far apart", "studies.lyapunov_spread", argv) + [
+    quick = rep.quick
+    lines = rep.header("Two correct computations of lambda1: how far apart") + [
         f"- run: {seconds:.0f} s wall" + (" (--quick: a smoke test, not the report's numbers)" if quick else ""), "",
         __doc__.split("\n\n", 1)[0].replace("\n", " "), "",
         f"Elastic {TABLE} orbits (the first {len(rows)} of the billiards report's invariant-measure orbits), "
@@ -111,27 +108,23 @@ def report(rows, argv, seconds, quick):
 
 
 def main(argv=None):
-    from studies.common import report_path, write
+    from lab.common import report_command
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    ap = argparse.ArgumentParser(prog="python -m studies.lyapunov_spread", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--orbits", type=int, default=4)
-    ap.add_argument("--copies", type=int, default=3)
-    ap.add_argument("--impacts", type=int, default=CONFIGS["full"]["impacts"])
-    ap.add_argument("--quick", action="store_true", help="2 orbits, 1 copy, 300 impacts, into a temporary folder")
-    ap.add_argument("--out", default=None, help="report (docs/lyapunov_spread.md regenerates the committed one; "
-                    "default runs/reports/, --quick a temporary folder)")
-    args = ap.parse_args(argv)
+    def options(ap):
+        ap.add_argument("--orbits", type=int, default=4)
+        ap.add_argument("--copies", type=int, default=3)
+        ap.add_argument("--impacts", type=int, default=CONFIGS["full"]["impacts"])
+    rep = report_command("studies.lyapunov_spread", "lyapunov_spread.md", __doc__.split("\n\n")[0], argv,
+                         options=options, quick="2 orbits, 1 copy, 300 impacts",
+                         out_help="the report (docs/lyapunov_spread.md regenerates the committed one)")
+    args = rep.args
     for name in ("orbits", "copies", "impacts"):
         if getattr(args, name) < 1:
-            ap.error(f"--{name} must be >= 1, got {getattr(args, name)}")
+            rep.error(f"--{name} must be >= 1, got {getattr(args, name)}")
     orbits, copies, impacts = (2, 1, 300) if args.quick else (args.orbits, args.copies, args.impacts)
-    out = report_path(args.out, args.quick, "lyapunov_spread.md")
     t0 = time.perf_counter()
     rows = study(orbits, copies, impacts)
-    write(str(out), report(rows, argv, time.perf_counter() - t0, args.quick))
-    print(f"wrote {out}")
-    return out, rows
+    return rep.write(report(rows, rep, time.perf_counter() - t0)), rows
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ into a temporary folder; it refuses --readme.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -110,7 +109,7 @@ def run_part(part: str, readme: str, workdir: Path, quick: bool = False, log=pri
     if quick:  # the current environment and this checkout's code (its compiled cache), run in the copy
         env["PYTHONPATH"] = str(ROOT)
         env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
-    from studies.common import machine_lines
+    from lab.common import machine_lines
     machine, load_at_start = machine_lines(), os.getloadavg()
     rows = []
     for step in steps_of(readme_block(readme, part)):
@@ -261,7 +260,7 @@ def update_readme(path: Path, results: dict) -> None:
     """Rewrite each part's sentence between its markers; ValueError if a marker is missing."""
     import textwrap
 
-    from studies.common import replace_text_block
+    from lab.common import replace_text_block
     text = path.read_text()
     for part in PARTS:
         begin, end = (m.format(part=part) for m in README_MARKS)
@@ -283,21 +282,22 @@ def readme_marked(text: str, part: str) -> str | None:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--parts", nargs="+", choices=list(PARTS), default=list(PARTS))
-    ap.add_argument("--out", default=None, help="the report (default: runs/reports/readme_costs.md under the "
-                                                "working directory; --quick: a new temporary directory); the "
-                                                "measurements go beside it (.json)")
-    ap.add_argument("--readme", default=None, help="also rewrite the cost sentences of this README (not with --quick)")
-    ap.add_argument("--quick", action="store_true", help="the main job in the current environment, training cut short")
-    ap.add_argument("--report-only", action="store_true", help="measure nothing: the report of the parts measured so far")
-    args = ap.parse_args(argv)
+    from lab.common import report_command
+
+    def options(ap):
+        ap.add_argument("--parts", nargs="+", choices=list(PARTS), default=list(PARTS))
+        ap.add_argument("--readme", default=None, help="also rewrite the cost sentences of this README (not with "
+                        "--quick)")
+        ap.add_argument("--report-only", action="store_true", help="measure nothing: the report of the parts "
+                        "measured so far")
+    rep = report_command("studies.measure_readme", "readme_costs.md", __doc__, argv, options=options,
+                         quick="the main job in the current environment, training cut short",
+                         out_help="the report, its measurements beside it (.json)")
+    args, out = rep.args, rep.out
     if args.quick and args.report_only:
-        ap.error("--quick and --report-only exclude each other")
+        rep.error("--quick and --report-only exclude each other")
     if args.quick and args.readme:
-        ap.error("--readme refuses --quick: a quick run never writes the README")
-    from studies.common import report_path, write
-    out = report_path(args.out, args.quick, "readme_costs.md")
+        rep.error("--readme refuses --quick: a quick run never writes the README")
     store = out.with_suffix(".json")
     results = json.loads(store.read_text()) if store.is_file() else {}
     readme = (ROOT / "README.md").read_text()
@@ -308,11 +308,8 @@ def main(argv=None):
         store.parent.mkdir(parents=True, exist_ok=True)
         store.write_text(json.dumps(results, indent=2))  # after each part: a later failure keeps it
     if not results:
-        ap.error(f"no part measured yet in {store}: run without --report-only first")
-    lines = report(results)
-    write(str(out), lines)
-    print("\n".join(lines))
-    print(f"wrote {out} (measurements: {store})")
+        rep.error(f"no part measured yet in {store}: run without --report-only first")
+    rep.write(report(results), echo=True)
     if args.readme:
         update_readme(Path(args.readme), results)
         print(f"rewrote the cost sentences of {args.readme}")

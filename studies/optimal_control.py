@@ -2,7 +2,7 @@
 
     python -m studies.optimal_control [--quick] [--pairs 50] [--single-input-pairs 10] [--cross-check-pairs 10]
                                        [--workers 16] [--out docs/optimal_control_central.md] [--runs runs/optimal_control]
-                                       [--study-runs runs/study] [--report-only | --cross-check-only]
+                                       [--report-only | --cross-check-only]
 
 The central study (docs/optimal_control_central.md): slow starts and central targets, where impacts gave
 no gain; studies/impact_oc.py (docs/optimal_control.md) reuses these problems and solvers on pairs where
@@ -38,17 +38,13 @@ impacts and is better; no gap does not prove that no better one with impacts exi
 Every solve is verified by simulating its controls again on the table; a solve that fails to converge
 or whose verification fails is reported as such ("failed"), never dropped.
 
-The solved pairs are saved to RUNS/rows.pkl; ``--report-only`` rewrites the report from them, and the
-report's last section runs the RL study's trained agents (``--study-runs``) on the same pairs
-(studies/optimal_vs_rl.py).
+The solved pairs are saved to RUNS/rows.pkl; ``--report-only`` rewrites the report from them.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import pickle
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -403,6 +399,21 @@ def answer(summary) -> list[str]:
     return lines
 
 
+def draw_plans(ax, r, points, label):
+    """The table's wall and pair r's plans with and without impacts (impacts marked x); label(key, sol) names each."""
+    wall = scene_table(r["scene"]).boundary(256)
+    ax.plot(wall[:, 0], wall[:, 1], "k-", lw=1)
+    for key, style in (("with", "C0-"), ("without", "C1--")):
+        sol = r[key]
+        if sol.traj is None:
+            continue
+        p = sol.traj.states_at(np.linspace(0.0, sol.traj.final_time, points))
+        ax.plot(p[:, 0], p[:, 1], style, lw=1.2, label=label(key, sol))
+        if sol.traj.n_impacts:
+            q = sol.traj.impact_states
+            ax.plot(q[:, 0], q[:, 1], "rx", ms=7)
+
+
 def plot_examples(rows, path, n=4):
     """A PNG of up to n optimal trajectories (those using impacts first); False without matplotlib."""
     try:
@@ -418,19 +429,8 @@ def plot_examples(rows, path, n=4):
         return False
     fig, axes = plt.subplots(1, len(picks), figsize=(4 * len(picks), 4), squeeze=False)
     for ax, r in zip(axes[0], picks):
-        wall = scene_table(r["scene"]).boundary(256)
-        ax.plot(wall[:, 0], wall[:, 1], "k-", lw=1)
-        for key, style in (("with", "C0-"), ("without", "C1--")):
-            sol = r[key]
-            if sol.traj is None:
-                continue
-            t = np.linspace(0.0, sol.traj.final_time, 400)
-            p = sol.traj.states_at(t)
-            ax.plot(p[:, 0], p[:, 1], style, lw=1.2, label=f"impacts {'allowed' if key == 'with' else 'forbidden'}"
-                    f" ({sol.status.split(':')[0]})")
-            if sol.traj.n_impacts:
-                q = sol.traj.impact_states
-                ax.plot(q[:, 0], q[:, 1], "rx", ms=7)
+        draw_plans(ax, r, 400, lambda key, sol: f"impacts {'allowed' if key == 'with' else 'forbidden'}"
+                                                f" ({sol.status.split(':')[0]})")
         if "target" in r:
             ax.plot(*r["target"], "o", mfc="none", mec="k", ms=8, label="target")
         ax.set_aspect("equal")
@@ -477,14 +477,15 @@ def cross_check(rows, rel=1e-6):
     return out
 
 
-def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None):
-    """The report from the solved rows (single shooting; multiple-shooting rows go to the cross-check)."""
+def write_report(rep, rows, commands, seconds: float):
+    """The report (rep.out) from the solved rows (single shooting; multiple-shooting rows go to the cross-check);
+    commands: the command lines of the runs that solved them."""
     checked = [r for r in rows if not is_single(r)]
     rows = [r for r in rows if is_single(r)]
     summary = summarise(rows)
-    png = out_path.with_name("optimal_control.png")
+    png = rep.out.with_name("optimal_control.png")
     has_png = plot_examples(rows, png)
-    from studies.common import machine_lines
+    from lab.common import machine_lines
 
     lines = ["# Does the optimal penny need impacts? (the central study: slow starts, central targets)", "",
              *machine_lines(),
@@ -531,51 +532,42 @@ def write_report(rows, out_path: Path, commands, seconds: float, study_runs=None
                   f"shooting lower in {c['single_better']}. Solver time: {c['seconds_single']:.0f} s single, "
                   f"{c['seconds_multiple']:.0f} s multiple, which is why the study above uses single shooting at "
                   f"these horizons (at most {MAX_ROWS} rows)."]
-    if study_runs is not None:
-        from studies.optimal_vs_rl import compare, markdown
-
-        lines += [""] + markdown(*compare(rows, study_runs), study_runs)
-    out_path.write_text("\n".join(lines) + "\n")
+    rep.write(lines)
     return summary
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description="Optimal control with and without impacts (docs/optimal_control.md)")
-    ap.add_argument("--quick", action="store_true", help="2 pairs of one scene/task, to a temporary folder (never docs/)")
-    ap.add_argument("--pairs", type=int, default=50)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=1, help="processes solving pairs in parallel")
-    ap.add_argument("--single-input-pairs", type=int, default=10,
-                    help="pairs for the steer-only and drive-only minimum-time problems (default 10)")
-    ap.add_argument("--cross-check-pairs", type=int, default=10,
-                    help="pairs whose minimum-effort problems are solved again by multiple shooting (default 10)")
-    ap.add_argument("--out", type=Path, default=None, help="report path (default docs/optimal_control_central.md; "
-                                                              "--quick: a temporary folder)")
-    ap.add_argument("--runs", type=Path, default=None,
-                    help="where the solved pairs are saved (rows.pkl; default runs/optimal_control, --quick: beside "
-                         "the report)")
-    ap.add_argument("--study-runs", type=Path, default=Path("runs/study"),
-                    help="the RL study's job folder: its trained agents are run on the same pairs (default runs/study)")
-    stage = ap.add_mutually_exclusive_group()
-    stage.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
-    stage.add_argument("--cross-check-only", action="store_true",
-                       help="redo only the multiple-shooting cross-check on the saved rows.pkl, then the report")
-    args = ap.parse_args(argv)
+    from lab.common import report_command
+
+    def options(ap):
+        ap.add_argument("--pairs", type=int, default=50)
+        ap.add_argument("--seed", type=int, default=0)
+        ap.add_argument("--workers", type=int, default=1, help="processes solving pairs in parallel")
+        ap.add_argument("--single-input-pairs", type=int, default=10,
+                        help="pairs for the steer-only and drive-only minimum-time problems (default 10)")
+        ap.add_argument("--cross-check-pairs", type=int, default=10,
+                        help="pairs whose minimum-effort problems are solved again by multiple shooting (default 10)")
+        ap.add_argument("--runs", type=Path, default=None,
+                        help="where the solved pairs are saved (rows.pkl; default runs/optimal_control, --quick: beside "
+                             "the report)")
+        stage = ap.add_mutually_exclusive_group()
+        stage.add_argument("--report-only", action="store_true", help="rewrite the report from the saved rows.pkl")
+        stage.add_argument("--cross-check-only", action="store_true",
+                           help="redo only the multiple-shooting cross-check on the saved rows.pkl, then the report")
+    rep = report_command("studies.optimal_control", "optimal_control_central.md", "Optimal control with and without "
+                         "impacts (docs/optimal_control_central.md)", argv, options=options, docs_default=True,
+                         quick="2 pairs of one scene/task")
+    args, out = rep.args, rep.out
     for name in ("pairs", "workers"):
         if getattr(args, name) < 1:
             raise SystemExit(f"--{name} must be >= 1, got {getattr(args, name)}")
     for name in ("single_input_pairs", "cross_check_pairs"):
         if getattr(args, name) < 0:
             raise SystemExit(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
-    docs = Path(__file__).resolve().parents[1] / "docs"
     if args.quick:
-        out = args.out or Path(tempfile.mkdtemp(prefix="optimal_control_")) / "optimal_control.md"
-        if out.resolve().parent == docs:
-            raise SystemExit("--quick never writes into docs/")
         scenes, tasks, objectives, n_pairs, checked = ("ellipse",), ("reach",), ("effort",), 2, 1
         cmd = "python -m studies.optimal_control --quick"
     else:
-        out = args.out or docs / "optimal_control_central.md"
         scenes, tasks, objectives, n_pairs, checked = SCENES, TASKS, OBJECTIVES, args.pairs, args.cross_check_pairs
         cmd = (f"python -m studies.optimal_control --pairs {args.pairs} --single-input-pairs "
                f"{args.single_input_pairs} --cross-check-pairs {args.cross_check_pairs} --seed {args.seed}")
@@ -609,9 +601,7 @@ def main(argv=None):
         runs.mkdir(parents=True, exist_ok=True)
         with open(saved, "wb") as f:
             pickle.dump((rows, seconds, commands), f)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_report(rows, out, commands, seconds, study_runs=args.study_runs)
-    print(f"wrote {out}")
+    write_report(rep, rows, commands, seconds)
     return out
 
 

@@ -10,14 +10,12 @@ advanced together with the batched physics.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 
 import numpy as np
 
 import penny_env as pe
 import penny_env.batch as pb
-from studies.common import header, report_path
+from lab.common import report_command
 
 PAPER_STATE = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
 SCENES = [("circle", pe.Circle(0.2), "elastic"), ("circle", pe.Circle(0.2), "plastic"),
@@ -88,19 +86,14 @@ def chaos(times, n=100, seed=0, params=pe.PennyParams(), table=pe.Ellipse(0.15, 
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="fewer impacts and pennies (for tests)")
-    ap.add_argument("--out", default=None,
-                    help="Markdown report, PNGs next to it (default: runs/reports/paper_figures.md under the working "
-                    "directory; --quick: a new temporary directory)")
-    args = ap.parse_args(argv)
+    rep = report_command("studies.paper_figures", "paper_figures.md", __doc__, argv,
+                         quick="fewer impacts and pennies (for tests)")
+    args = rep.args
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    out = report_path(args.out, args.quick, "paper_figures.md")
-    out.parent.mkdir(parents=True, exist_ok=True)
     n_imp = 5 if args.quick else 20
     fig, axes = plt.subplots(2, 2, figsize=(10, 10.5))
     rows = []
@@ -110,10 +103,7 @@ def main(argv=None):
                     f"{tr.energies()[-1] / tr.energies()[0] if tr.n_impacts else 1:.6f} |")
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
-    scenes_png = out.with_name(out.stem + "_scenes.png")
-    fig.savefig(scenes_png, dpi=110)
-    plt.close(fig)
+    scenes_png = rep.figure(fig, "_scenes.png", rect=(0, 0.04, 1, 1))
 
     times = [0.0, 5.0, 10.0, 20.0] if not args.quick else [0.0, 2.0]
     snaps = chaos(times, n=20 if args.quick else 100)
@@ -129,12 +119,9 @@ def main(argv=None):
             ax.set_ylabel("y [m]")
         spread = np.hypot(S[0] - S[0].mean(), S[1] - S[1].mean()).max() * 1e3
         ax.set_title(f"t = {t:g} s: {S.shape[1]} pennies, spread {spread:.3g} mm", fontsize=8)
-    fig.tight_layout()
-    chaos_png = out.with_name(out.stem + "_chaos.png")
-    fig.savefig(chaos_png, dpi=110)
-    plt.close(fig)
+    chaos_png = rep.figure(fig, "_chaos.png")
 
-    lines = header("The paper's figures, reproduced", "studies.paper_figures", argv or sys.argv[1:])
+    lines = rep.header("The paper's figures, reproduced")
     lines += ["Figures 1-4 of the paper: the first impacts of the penny started at x = y = theta = 0, "
               "phi = pi/2, theta_dot = 10, phi_dot = 0.2. Red segments: the penny at each impact; "
               "black dots: front-end impacts, orange squares: back-end impacts. In the plastic panels the impacts "
@@ -145,10 +132,7 @@ def main(argv=None):
               "Figure 5 (hints of chaos): copies of the elastic-ellipse penny with theta_dot and phi_dot "
               "perturbed by less than 0.005, at several times (contact points; spread: the largest distance from "
               "their mean).", "", f"![chaos]({chaos_png.name})", ""]
-    out.write_text("\n".join(lines))
-    print("\n".join(lines))
-    print(f"wrote {out}, {scenes_png} and {chaos_png}")
-    return out
+    return rep.write(lines, echo=True)
 
 
 if __name__ == "__main__":

@@ -16,16 +16,14 @@ over impacts, over dense samples of the trajectory and over samples just before 
 """
 from __future__ import annotations
 
-import argparse
 import math
 import multiprocessing as mp
-import sys
 import time
 import traceback
 
 import numpy as np
 
-from studies import common
+from lab import common
 from penny_env.backends.pennies import advance_pennies
 from penny_env.physics import Circle, Ellipse, PennyParams, SolverSettings, Stadium, simulate
 from penny_env.physics.flows import end_kinematics, flow, kinetic_energy
@@ -581,15 +579,14 @@ def report(results, argv, total_wall) -> list[str]:
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description="stress cases of the penny simulator with pass/fail")
-    ap.add_argument("--quick", action="store_true", help="fewer and shorter cases")
-    ap.add_argument("--out", default=None, help="Markdown report (e.g. docs/stability.md)")
-    ap.add_argument("--budget", type=float, default=None,
-                    help=f"wall-clock budget per case, a hang detector [s] (default {CASE_BUDGET:g}, --quick "
-                         f"{QUICK_CASE_BUDGET:g}: 10 times the slowest case on a slow machine)")
-    ap.add_argument("--only", nargs="*", default=None, help="run only cases whose name contains one of these")
-    args = ap.parse_args(argv)
+    def options(ap):
+        ap.add_argument("--budget", type=float, default=None,
+                        help=f"wall-clock budget per case, a hang detector [s] (default {CASE_BUDGET:g}, --quick "
+                             f"{QUICK_CASE_BUDGET:g}: 10 times the slowest case on a slow machine)")
+        ap.add_argument("--only", nargs="*", default=None, help="run only cases whose name contains one of these")
+    rep = common.report_command("studies.stability", "stability.md", "stress cases of the penny simulator with "
+                                "pass/fail", argv, quick="fewer and shorter cases", options=options)
+    args = rep.args
     budget = args.budget or (QUICK_CASE_BUDGET if args.quick else CASE_BUDGET)
     t0 = time.perf_counter()
     results = []
@@ -601,9 +598,7 @@ def main(argv=None):
             status = "PASS" if r["passed"] else "FAIL: " + "; ".join(r["reasons"])
             print(f"[{name}] {r.get('label', '')}: {status}  ({_fmt_measured(r['measured'])})", flush=True)
     total = time.perf_counter() - t0
-    if args.out:
-        common.write(args.out, report(results, argv, total))
-        print(f"wrote {args.out}")
+    rep.write(report(results, rep.argv, total))
     print(f"total {total:.1f} s")
     return results
 

@@ -29,7 +29,7 @@ def ppo_snippet(readme: Path = README) -> str:
 
 
 def main(argv=None):
-    from studies.common import machine_lines
+    from lab.common import machine_lines
     from training.train import evaluate
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -1,4 +1,4 @@
-"""Demonstrations for the ladder's privileged agents (issue 36): certified witness episodes (studies/witness.py) of
+"""Demonstrations for the ladder's privileged agents: certified witness episodes (studies/witness.py) of
 training seeds, written with training.protocol.save_demos.
 
 ``python -m studies.witness_demos ENV_ID OUT.npz [--pairs N] [--seed S] [field=value ...]``

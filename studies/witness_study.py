@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from studies.cells import TABLES, TABLE_NAMES, EXTRA_TABLES, ALL_TABLES, LAWS, PROBE_TASKS, cell_spec, all_cells, table_name
-from studies.stats import clopper_pearson
+from lab.stats import clopper_pearson
 from studies.verdict import CONTEXT, THEORY_DOC, anchor_of, cell_verdict, possible_by_theorem, theorem_of
 from studies.witness import PROBES, Witness, positive_int
 
@@ -270,8 +270,8 @@ def _count_md(c) -> str:
 
 def update_readme(path: Path, answer: str) -> bool:
     """The text between this report's README_BEGIN and README_END markers of a file (the README, a report that quotes
-    the block) rewritten; False where the file has none (studies/common.replace_block)."""
-    from studies.common import replace_block
+    the block) rewritten; False where the file has none (lab/common.replace_block)."""
+    from lab.common import replace_block
     return replace_block(path, README_BEGIN, README_END, answer)
 
 
@@ -282,7 +282,7 @@ def _span(values, fmt: str) -> str:
 
 
 def write_report(out: Path, cells, pair_rows, meta):
-    from studies.common import machine_lines
+    from lab.common import machine_lines
     lines = ["# Which actuations and walls make the penny controllable: theorems and certified witnesses", "",
              *meta["machine"], f"- command: `{meta['command']}` ({meta['wall_s']:.0f} s wall, "
              f"{sum(float(c['seconds']) for c in cells):.0f} s CPU in the witness searches, finished {meta['date']})",
@@ -358,7 +358,7 @@ def main(argv=None):
     if args.out_dir is not None:
         out_dir = args.out_dir.resolve()
     elif args.quick:
-        from studies.common import report_path
+        from lab.common import report_path
         out_dir = report_path(None, True, "witnesses.md").parent
     else:
         out_dir = DOCS
@@ -372,8 +372,8 @@ def main(argv=None):
         cells, pair_rows = read_csv(cells_csv), read_csv(pairs_csv)
         meta = dict(json.loads(meta_json.read_text()), rewritten=True)
     else:
-        from studies.common import command_line, machine_lines
-        from studies.provenance import stamp_line
+        from lab.common import command_line, machine_lines
+        from lab.provenance import stamp_line
         cells_todo = QUICK_CELLS if args.quick else all_cells()
         pairs = 2 if args.quick else args.pairs
         t0 = time.perf_counter()

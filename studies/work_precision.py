@@ -17,14 +17,11 @@ work_precision.png (impact times) and work_precision_state.png (state at the fix
 """
 from __future__ import annotations
 
-import argparse
-import os
-import sys
 import time
 
 import numpy as np
 
-from studies import common
+from lab import common
 from studies.integrators import rk4_hybrid, run_simulate, run_step_path, solve_ivp_hybrid
 from studies.matching import match_impacts, state_error, unresolvable_mask
 from studies.reference import extra_scenes, paper_scenes
@@ -204,27 +201,20 @@ def report(scs, results, argv, png_names) -> list[str]:
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    ap = argparse.ArgumentParser(description="work-precision report of penny_env and other integrators")
-    ap.add_argument("--quick", action="store_true", help="fewer settings, shorter budgets")
-    ap.add_argument("--out", default=None, help="Markdown report (e.g. docs/work_precision.md); PNGs go next to it")
-    ap.add_argument("--all-scenes", action="store_true", help="also the restitution scene")
-    args = ap.parse_args(argv)
-    from studies.common import refuse_quick_into_docs
-    refuse_quick_into_docs(args.out, args.quick)
+    rep = common.report_command("studies.work_precision", "work_precision.md", "work-precision report of penny_env "
+                                "and other integrators", argv, quick="fewer settings, shorter budgets",
+                                options=lambda ap: ap.add_argument("--all-scenes", action="store_true",
+                                                                   help="also the restitution scene"))
+    args = rep.args
     t0 = time.perf_counter()
     scs, results = run(quick=args.quick, all_scenes=args.all_scenes)
     for r in results:
         m = r["match"]
         print(f"{r['scene']:27s} {r['method']:32s} {r['setting']:18s} {1e3 * r['time']:10.2f} ms  "
               f"err {r['err']:.2e}  {m.summary() if m else '-'}  state err {r['serr']:.2e}  {r['status']}")
-    if args.out:
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)  # the PNGs are written first
-        base = os.path.splitext(args.out)[0]
-        pngs = (base + ".png", base + "_state.png")
-        plot(scs, results, *pngs)
-        common.write(args.out, report(scs, results, argv, [os.path.basename(p) for p in pngs]))
-        print(f"wrote {args.out}, {pngs[0]}, {pngs[1]}")
+    pngs = (rep.beside(".png"), rep.beside("_state.png"))  # (written first: the report names them)
+    plot(scs, results, *(str(p) for p in pngs))
+    rep.write(report(scs, results, rep.argv, [p.name for p in pngs]))
     print(f"total {time.perf_counter() - t0:.1f} s")
     return scs, results
 

@@ -1,4 +1,4 @@
-"""Evaluation episodes of a policy on an env id, with what the study measures per episode."""
+"""Evaluation episodes of a policy on an env id, with what training.evaluate measures per episode."""
 from __future__ import annotations
 
 import numpy as np

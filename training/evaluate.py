@@ -4,7 +4,7 @@
                                         [--gif PATH [--gif-success]] [--best]
 
 RUN_DIR is a folder written by training.runner.train_agent (config.json + model.zip): the output
-folder of training.train and every (cell, agent, seed) folder of studies.study for PPO/SAC.
+folder of training.train.
 --best evaluates best_model.zip (the better of the best evaluation during training and the final model, on the
 same fresh episodes when training ended: training.best_choice) and, on the same episodes, the final model beside
 it, both with their intervals, into RUN_DIR/evaluation_best.json. Episodes are deterministic-policy

@@ -1,4 +1,4 @@
-"""Reference policies of the study: zero actions, uniformly random actions, and a hand-written
+"""Reference policies: zero actions, uniformly random actions, and a hand-written
 feedback controller for the both-controls tasks. Each is ``policy(obs (N, obs_dim)) -> actions (N, k)``."""
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ actor mean and the critic with orthogonal initialisation, and a state-independen
 **The ladder's configuration** (issue 36; ``ladder_args()``, ``--ladder``): the fast configuration on a CPU
 (``FAST_CPU``, ``--fast``: 4096 envs x 32 steps, 2 epochs of minibatches of 16384: 16 gradient steps per rollout
 of 131,072 transitions; the update's cost is samples x epochs, so this halves the 4-epoch setting's), gamma 0.999,
-the fair reward of studies/fair_pure_rl.py (``fair_reward``: the success bonus only, on top of env_kwargs, in the
+the fair reward (training/protocol.py's FAIR_REWARD, ``fair_reward``: the success bonus only, on top of env_kwargs, in the
 training env) and training envs seeded from ``env_seed_base`` = 1e7 (never the evaluation's pair seeds).
 ``devtools/ppo_speed.py`` measures it end to end beside SB3's PPO. torch.compile of the loss was measured on this
 CPU (one thread, minibatch 16384, 64-64 MLPs, 2026-11-27, load ~6): 119 ms per gradient step against 110 ms eager
@@ -115,7 +115,6 @@ class Args:
     env_seed_base: int | None = None  # training envs reset with seed env_seed_base + 100_000 seed (None: seed)
 
 
-# the fair reward of studies/fair_pure_rl.py (REWARD): the success bonus only
 # the fast configuration on a CPU: few, large minibatches over many envs (the update's cost is samples x epochs)
 FAST_CPU = {"num_envs": 4096, "num_steps": 32, "minibatch_size": 16384, "update_epochs": 2, "device": "cpu"}
 # the ladder's plain PPO ("ppo"): the fast configuration, gamma 0.999, the fair reward, training seeds >= 1e7

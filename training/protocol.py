@@ -32,7 +32,7 @@ FAIR_REWARD = {"progress_weight": 0.0, "speed_cost": 0.0, "ctrl_cost": 0.0, "suc
 
 
 def fair_reward_kwargs(env_id: str, env_kwargs: dict | None = None) -> dict:
-    """The fields of FAIR_REWARD (the success bonus only: studies/fair_pure_rl.py's reward) that the task of
+    """The fields of FAIR_REWARD (the success bonus only: no progress term, no speed or control cost) that the task of
     ``env_id`` with ``env_kwargs`` has (reach has no speed cost), so every agent trains on the same reward."""
     from penny_env.envs.scene import env_presets, resolve
     fields = {**env_presets()[env_id], **(env_kwargs or {})}  # (a cell's overrides may replace the scene itself)

@@ -13,7 +13,7 @@
                              RUN_DIR/best.json its timesteps and scores
     RUN_DIR/model.zip        the final model (``python -m training.evaluate RUN_DIR``)
 
-training.train, studies.study and training.evaluate all use this layout. Ctrl-C during training saves a
+training.train and training.evaluate use this layout. Ctrl-C during training saves a
 checkpoint of the step it reached and raises TrainingInterrupted (a KeyboardInterrupt) naming it; a resumed
 run appends to progress.csv (its rows up to the checkpoint kept) and adds the time of the part before the
 checkpoint to its own.

@@ -1,6 +1,6 @@
-"""PennyGoalEnv: the reach task as a goal-conditioned env (Gymnasium-Robotics' GoalEnv convention),
-what ``gymnasium.make(id, goal_env=True)`` builds; the vector counterpart is
-``penny_env.sb3.PennySB3VecEnv(id, goal_env=True)``, with the same observations and rewards."""
+"""PennyGoalEnv: a goal task (reach; any task whose record says goal=True) as a goal-conditioned env
+(Gymnasium-Robotics' GoalEnv convention), what ``gymnasium.make(id, goal_env=True)`` builds; the vector counterpart
+is ``penny_env.sb3.PennySB3VecEnv(id, goal_env=True)``, with the same observations and rewards."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,8 +9,20 @@ from gymnasium import spaces
 from .penny_env import PennyEnv
 
 
+def goal_setup(core, obs_space):
+    """(L, tolerance, the dict observation space) of a goal env on ``core``'s task (TaskRecord.goal) and table, the
+    single env's and the SB3 adapter's; ValueError naming the task otherwise."""
+    if not core.task_record.goal or core.plane:
+        raise ValueError(f"goal_env=True needs a goal task (a reach task on a table, or a task registered with "
+                         f"goal=True on one), got task {core.task.kind!r} on "
+                         f"{'the open plane' if core.plane else 'a table'}")
+    goal = spaces.Box(-2.0, 2.0, (2,), np.float32)
+    return float(core.L), float(core.task.tolerance), spaces.Dict({"observation": obs_space, "achieved_goal": goal,
+                                                                    "desired_goal": goal})
+
+
 class PennyGoalEnv(PennyEnv):
-    """PennyEnv (a reach task on a table) with dict observations ``{"observation": obs,
+    """PennyEnv (a goal task on a table: TaskRecord.goal, the reach task's) with dict observations ``{"observation": obs,
     "achieved_goal": (x, y) / L, "desired_goal": (tx, ty) / L}`` (read from the float32 observation:
     achieved = obs[0:2], desired = obs[0:2] + obs[8:10]) and the sparse reward
     ``compute_reward(achieved_goal, desired_goal, info) = -(L |achieved - desired| >= tolerance)``
@@ -20,14 +32,7 @@ class PennyGoalEnv(PennyEnv):
 
     def _setup(self):
         super()._setup()
-        core = self._core
-        if core.task.kind != "reach" or core.plane:
-            raise ValueError(f"goal_env=True needs a reach task on a table, got task {core.task.kind!r} on "
-                             f"{'the open plane' if core.plane else 'a table'}")
-        self._L, self._tol = float(core.L), float(core.task.tolerance)
-        goal = spaces.Box(-2.0, 2.0, (2,), np.float32)
-        self.observation_space = spaces.Dict({"observation": self.observation_space, "achieved_goal": goal,
-                                              "desired_goal": goal})
+        self._L, self._tol, self.observation_space = goal_setup(self._core, self.observation_space)
 
     @staticmethod
     def _goal_obs(obs):

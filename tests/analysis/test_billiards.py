@@ -148,11 +148,11 @@ def test_quick_report_writes_to_a_temporary_directory(reports_untouched, capsys)
 
 def test_clopper_pearson_bounds_are_the_binomial_tails_and_honest_at_the_ends():
     """The exact interval's ends solve the binomial tail equations (from math.comb, not from scipy's beta
-    quantiles, which studies.stats uses): P(X >= k | lo) = P(X <= k | hi) = 0.025, and 0 or 1 at the ends."""
+    quantiles, which lab.stats uses): P(X >= k | lo) = P(X <= k | hi) = 0.025, and 0 or 1 at the ends."""
     pytest.importorskip("scipy.stats")
     from math import comb
 
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
 
     def cdf(p, m, n):
         return sum(comb(n, j) * p ** j * (1 - p) ** (n - j) for j in range(m + 1))

@@ -148,3 +148,26 @@ def test_sb3_subprocvecenv_with_plain_ids(method):
     obs, rew, done, infos = venv.step(np.zeros((2, 2), np.float32))
     venv.close()
     assert obs.shape == (2, 10) and infos[0]["impact_times"].shape == (8,)
+
+
+def test_goal_env_takes_any_task_registered_as_a_goal_task():
+    """goal_env=True reads the task record's goal flag, not the task's name: a user's reach-like task registered with
+    goal=True is a goal env with no edit of the package; the same task registered without it is refused."""
+    import dataclasses
+
+    import tests.step.example_task  # noqa: F401  (registers "hurry": reach in a hurry, its clock as entry 10)
+    from penny_env import register_task
+    from penny_env.sb3 import PennySB3VecEnv
+    from penny_env.step.tasks import TASKS
+    assert TASKS["reach"].goal and not TASKS["park"].goal and not TASKS["hurry"].goal
+    register_task(dataclasses.replace(TASKS["hurry"], name="hurry_goal", goal=True))
+    task = {"kind": "hurry_goal", "max_episode_steps": 50}
+    env = gym.make("PennyReach-Ellipse-v0", goal_env=True, task=task, backend="python")
+    obs, _ = env.reset(seed=0)
+    assert obs["observation"].shape == (11,)
+    assert np.array_equal(obs["desired_goal"], obs["observation"][0:2] + obs["observation"][8:10])
+    assert isinstance(PennySB3VecEnv("PennyReach-Ellipse-v0", num_envs=2, goal_env=True, task=task,
+                                     backend="python").observation_space, gym.spaces.Dict)
+    with pytest.raises(ValueError, match="registered with goal=True"):
+        gym.make("PennyReach-Ellipse-v0", goal_env=True, task={"kind": "hurry", "max_episode_steps": 50},
+                 backend="python")

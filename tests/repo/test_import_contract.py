@@ -1,6 +1,6 @@
 """The import contract (pyproject.toml's [tool.importlinter], docs/architecture.md): the package's layers import one
 way (physics, the step, the backends, the envs, then what a user calls on top), the repository's folders too
-(the package, training, studies, devtools), and no circle of imports is left between siblings at any depth.
+(the package, lab, training, studies, devtools), and no circle of imports is left between siblings at any depth.
 lint-imports (import-linter, the test extra) checks it; without it the test skips."""
 import subprocess
 import sys
@@ -32,3 +32,26 @@ def test_the_contract_names_every_layer_of_the_package():
     present = {p.stem if p.is_file() else p.name for p in (ROOT / "penny_env").iterdir()
                if (p.suffix == ".py" and p.stem != "__init__") or (p.is_dir() and (p / "__init__.py").exists())}
     assert present <= named | {"presets"}, sorted(present - named)
+
+
+@pytest.mark.fast
+def test_the_layout_in_architecture_md_is_the_contract_s():
+    """docs/architecture.md's layout block (the one layout of the repository; the README links it) names the
+    repository's folders and the package's layers in the contract's order."""
+    import re
+    import tomllib
+    contracts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    repo = next(c for c in contracts if c.get("type") == "layers" and "containers" not in c)
+    package = next(c for c in contracts if c.get("containers") == ["penny_env"])
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    block = re.search(r"## Layers\n.*?```\n(.*?)```", text, re.S).group(1)
+    tops = [m.group(1) for m in re.finditer(r"^(\w+)/ ", block, re.M)]
+    assert tops == repo["layers"], (tops, repo["layers"])
+    inner = [re.split(r"\s{2,}", line.strip())[0] for line in block.splitlines() if re.match(r"^  \S", line)]
+    named = [sorted(x.strip().removesuffix("/").removesuffix(".py") for x in entry.rstrip(",").split(", "))
+             for entry in inner]
+    layers = [sorted(m.strip() for m in layer.replace("|", ":").split(":")) for layer in package["layers"]]
+    assert named == layers, (named, layers)
+    readme = (ROOT / "README.md").read_text()
+    assert "[docs/architecture.md](docs/architecture.md)" in readme.split("## Layout", 1)[1]
+    assert "| folder |" not in readme  # no second copy of the layout

@@ -17,10 +17,10 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def copy_package(dest: Path) -> Path:
-    """A copy of the checkout's package sources (no caches) with training/ (the wheel must leave it out),
+    """A copy of the checkout's package sources (no caches) with training/ and lab/ (the wheel must leave them out),
     pyproject.toml, README.md and the files the sdist and the wheel's metadata take (LICENSE, ...)."""
     dest.mkdir(parents=True, exist_ok=True)
-    for folder in ("penny_env", "training"):
+    for folder in ("penny_env", "training", "lab"):
         shutil.copytree(ROOT / folder, dest / folder, ignore=shutil.ignore_patterns("__pycache__", "_generated", "*.nbi", "*.nbc",
                                                                                    "*.stamp"))
     for name in ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "CHANGELOG.md", "CITATION.cff"):
@@ -54,7 +54,7 @@ def wheel(workdir):
 def test_the_wheel_ships_penny_env_with_its_data_and_no_top_level_training(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
     tops = {n.split("/")[0] for n in names}
-    assert tops == {"penny_env", next(t for t in tops if t.endswith(".dist-info"))}, tops  # no training, configs, tests
+    assert tops == {"penny_env", next(t for t in tops if t.endswith(".dist-info"))}, tops  # no training, lab, tests
     # everything the package reads at run time: every module, preset and reference data file of the checkout
     # (not the source the backends generate where they run: backends/_generated, git-ignored)
     needed = {p.relative_to(ROOT).as_posix() for p in (ROOT / "penny_env").rglob("*")

@@ -30,7 +30,7 @@ def test_every_id_in_the_readme_is_registered_and_vice_versa():
 
 def test_commands_in_the_readme_exist():
     import importlib.util
-    for module in set(re.findall(r"python -m ((?:penny_env|training)[\w.]*)", README)):
+    for module in set(re.findall(r"python -m ((?:penny_env|training|studies|devtools|lab)[\w.]*)", README)):
         assert importlib.util.find_spec(module) is not None, module
     for config in re.findall(r"(configs/[\w/]+\.yaml)", README):
         assert (Path(__file__).parents[2] / config).exists(), config

@@ -6,6 +6,7 @@ from typing import NamedTuple
 
 from penny_env import register_task
 from penny_env.step.tasks import ReachTask, TaskRecord
+from penny_env.step.tasks.reach import ReachConstants
 from penny_env.step.tasks.reach import constants as reach_constants
 from penny_env.step.tasks.reach import progress
 from penny_env.step.tasks.reach import target as reach_target
@@ -23,16 +24,9 @@ class HurryTask(ReachTask):
         self.set_number("time_cost", nonneg=True)
 
 
-class HurryConstants(NamedTuple):
-    length_scale: float
-    tolerance: float
-    progress_weight: float
-    ctrl_cost: float
-    success_bonus: float
-    target_scale: float
-    heading_offset: float
-    time_cost: float
-    max_steps: int
+# what the stages read: reach's constants, then the task's own (ints, floats, bools: they travel packed)
+HurryConstants = NamedTuple("HurryConstants", [*ReachConstants.__annotations__.items(), ("time_cost", float),
+                                               ("max_steps", int)])
 
 
 def constants(scene, task, L):

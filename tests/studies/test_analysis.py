@@ -141,10 +141,25 @@ def test_stability_quick(reports_untouched):
 
 def test_progress_bars_are_optional(monkeypatch):
     """tqdm (and rich, for SB3's bar) are optional extras: without them the commands run without a bar."""
-    from studies import common
+    from lab import common
     from training import train
     monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm raises ImportError
     items = [1, 2, 3]
     assert common.progress(items, disable=False) is items
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name in ("tqdm", "rich") else object())
     assert train._progress_bar_installed() is False
+
+
+def test_stability_expects_the_documented_refusal():
+    # tables narrower than R (1 + MIN_GAP) are refused with a ValueError naming MIN_GAP; the harness
+    # counted that refusal as a failure (3 of 64 checks)
+    from studies import stability
+    from penny_env.physics import Circle, PennyParams
+    P = PennyParams()
+    s0 = [0.0, 0.0, 0.0, 0.7, 2.0, 1.0]
+    narrow = stability.sim_case(s0, P, Circle(P.R * (1 + 1e-8)), "elastic", t_final=0.1)
+    assert narrow["passed"] and "MIN_GAP" in narrow["measured"]["refused"]
+    wide = stability.sim_case(s0, P, Circle(P.R * (1 + 1e-3)), "elastic", t_final=0.1)
+    assert "refused" not in wide["measured"] and wide["measured"]["impacts"] > 0
+    accepted = stability.refused_case(lambda: None, "MIN_GAP")
+    assert not accepted["passed"] and "accepted" in accepted["reasons"][0]

@@ -174,7 +174,7 @@ def test_quick_run_writes_its_report_outside_docs(reports_untouched):
 
 @pytest.mark.parametrize("content", [b"", b"null", b"[1, 2]", b"\xff\xfe\x00garbage", b'{"checkpoints": []}'])
 def test_a_damaged_result_is_named(tmp_path, content):
-    from studies.jobs import DamagedResult, finished, read_result
+    from lab.jobs import DamagedResult, finished, read_result
     path = tmp_path / "result.json"
     path.write_bytes(content)
     with pytest.raises(DamagedResult, match=f"{path} is damaged"):

@@ -123,45 +123,6 @@ def test_method_is_checked():
     assert segment_bounds(25, 10) == [0, 10, 20, 25] and segment_bounds(25, None) == [0, 25]
 
 
-def _parked_row(prob, sol):
-    return {"scene": prob.scene, "task": "park", "objective": "time", "pair": 0, "actuation": "both",
-            "start": prob.start, "target": prob.target, "with": sol, "without": sol}
-
-
-def test_the_probe_cells_pose_the_same_park_problems():
-    from studies import optimal_vs_rl as ovr
-    for scene, cell in ovr.CELLS.items():
-        assert ovr.mismatch(scene, cell) == ""
-    assert "law" in ovr.mismatch("ellipse", "PennyProbeBoth-Ellipse-Plastic-v0")
-    assert "table" in ovr.mismatch("ellipse", ovr.CELLS["stadium"])
-
-
-def test_agents_run_from_the_optimal_control_pairs(tmp_path):
-    """The comparison's episodes start from the pairs' own states and targets (reset options): zero torque from
-    a penny parked on its target succeeds in one row; from a pair 0.1 m away it never does."""
-    pytest.importorskip("stable_baselines3", reason="the study's agents are SB3 models")
-    from studies import optimal_vs_rl as ovr
-    from training.policies import zero_policy
-    from training.runner import train_agent
-
-    near = oc.Problem("ellipse", "park", START, [0.0, 0.0], impacts=True)
-    far = oc.Problem("ellipse", "park", START, [0.0, 0.1], impacts=True)
-    sol = oc.minimum_time(near, max_rows=4, maxiter=50)
-    rows = [_parked_row(near, sol), dict(_parked_row(far, sol), pair=1)]
-    eps = ovr.episodes_on_pairs(ovr.CELLS["ellipse"], zero_policy(2), ovr.park_pairs(rows, "ellipse"))
-    assert eps["success"] == [True, False] and eps["time"][0] == pytest.approx(0.05)
-    cell = ovr.CELLS["ellipse"]
-    train_agent(tmp_path / cell / "ppo" / "seed0", cell, "ppo", 0, 128, 2,
-                {"n_steps": 64, "batch_size": 64, "n_epochs": 1}, 1, 2)
-    results, notes = ovr.compare(rows, tmp_path)
-    agents = [r["agent"] for r in results]
-    assert agents == ["ppo", "feedback"] and notes == []  # no stadium rows: nothing to compare there
-    ppo = results[0]
-    assert ppo["episodes"] == 2 and ppo["seeds"] == 1 and 0.0 <= ppo["success"] <= 1.0
-    text = "\n".join(ovr.markdown(results, notes, tmp_path))
-    assert "| ellipse | ppo | 1 | 2 |" in text and "| ellipse | feedback | 1 | 2 |" in text
-
-
 def test_summary_counts_only_wall_hits_as_impacts_paying():
     """An allowed optimum that wins without touching the wall (inside the forbidden problem's margin) is better,
     but not an optimum that needs impacts; the answer lines are computed from those counts."""
@@ -180,26 +141,6 @@ def test_summary_counts_only_wall_hits_as_impacts_paying():
                                  "solved only with impacts allowed and with an impact.")
 
 
-def test_agent_summary_pairs_episodes_with_optima():
-    from studies import optimal_vs_rl as ovr
-
-    def sol(rows, ok=True):
-        return oc.Solution("optimal" if ok else "failed: x", rows, 0.0, np.zeros((rows, 2)), 0, 0.0, 0.05, 0.0)
-    sel = [{"with": sol(10), "without": sol(12)}, {"with": sol(20), "without": sol(1, ok=False)},
-           {"with": sol(5), "without": sol(5)}]
-    eps = [{"success": [True, True, False], "time": [2.0, 4.0, 20.0], "impacts": [1, 0, 0]},
-           {"success": [True, False, True], "time": [0.4, 20.0, 0.25], "impacts": [0, 0, 0]}]
-    r = ovr.summarise_agent("ellipse", "cell", "ppo", sel, eps)
-    assert r["episodes"] == 6 and r["success"] == pytest.approx(4 / 6)
-    assert r["rl_time"] == pytest.approx((2.0 + 4.0 + 0.4 + 0.25) / 4)
-    # optimal times over the successes on pairs both solves converged on: pairs 0, 0, 2
-    assert r["oc_with"] == pytest.approx((0.5 + 0.5 + 0.25) / 3) and r["oc_without"] == pytest.approx((0.6 + 0.6 + 0.25) / 3)
-    # ratios against the allowed optimum: 4, 4, 0.8, 1 -> median 2.5; one episode faster than the optimum
-    assert r["ratio_median"] == pytest.approx(2.5) and (r["rl_faster"], r["compared"]) == (1, 4)
-    assert r["impact_share"] == pytest.approx(0.25)
-
-
-# -- issue 20.5: optimal control where impacts can pay (studies/impact_oc.py) ------------------------------
 def _cfg(**kw):
     from studies import impact_oc as io
     cfg = {"seed": 0, "horizon": dict(io.HORIZON, both=30), "maxiter": 60, "random_starts": 0, "budget": 4,
@@ -274,7 +215,7 @@ def test_pays_needs_a_wall_hit_and_the_margin():
     rows.append(dict(row(sol(12, 2), sol(0, 0, ok=False)), actuation="drive", witness={"certified": False},
                      with_source="zero"))
     pooled = [s for s in io.summarise(rows) if s["scene"] == "all"][0]
-    from studies.stats import clopper_pearson
+    from lab.stats import clopper_pearson
     assert (pooled["pairs"], pooled["pays"], pooled["witnessed"], pooled["from_witness"]) == (5, 3, 3, 3)
     assert (pooled["without_failed"], pooled["only_with_failed"]) == (1, 1)
     assert pooled["ci"] == clopper_pearson(3, 5) and pooled["mean_gap"] == pytest.approx(0.5)

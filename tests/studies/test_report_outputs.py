@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from studies.common import report_path
+from lab import provenance
+from lab.common import report_path
 
 REPO = Path(__file__).parents[2]
 
@@ -24,11 +25,9 @@ def test_report_path(reports_untouched):
     assert Path(tempfile.gettempdir()).resolve() in quick.resolve().parents and cwd not in quick.parents
 
 
-# the report commands whose --out has a default; the others (bench_solvers, stability, work_precision,
-# throughput) write nothing without --out
+# report commands whose quick run is cheap enough to run here without --out
 DEFAULTED = [("studies.dynamics", "matplotlib"), ("studies.paper_figures", "matplotlib"),
-             ("studies.controllability", "matplotlib"), ("studies.baselines", "stable_baselines3"),
-             ("studies.ppo_compare", "stable_baselines3")]
+             ("studies.controllability", "matplotlib"), ("studies.baselines", "stable_baselines3")]
 
 
 @pytest.mark.parametrize("module, needs", DEFAULTED)
@@ -68,15 +67,51 @@ def test_throughput_quick_refuses_to_write_the_readme(reports_untouched):
     assert readme.read_text() == "<!-- throughput:start -->\n<!-- throughput:end -->\n"
 
 
-@pytest.mark.parametrize("module", ["devtools.compile_time", "devtools.contention", "devtools.rare_share",
-                                    "devtools.throughput", "devtools.throughput_compare", "devtools.throughput_gpu",
-                                    "studies.bench_solvers", "studies.work_precision", "studies.dynamics"])
-def test_quick_never_overwrites_a_committed_report(module):
+# every report command starts with lab.common.report_command; the commands with --quick that do not, and why
+REPORT_COMMANDS = ["studies.baselines", "studies.bench_solvers", "studies.billiards", "studies.billiards_answer",
+                   "studies.controllability", "studies.dynamics", "studies.impact_oc", "studies.lyapunov_spread",
+                   "studies.measure_readme",
+                   "studies.optimal_control", "studies.paper_figures", "studies.ppo_torch_report", "studies.stability",
+                   "studies.work_precision", "devtools.compile_time", "devtools.contention", "devtools.cuda_kernels",
+                   "devtools.ppo_speed", "devtools.rare_share", "devtools.throughput", "devtools.throughput_compare",
+                   "devtools.throughput_gpu"]
+NOT_REPORT_COMMANDS = {"studies.ladder": "its report goes to --out; the ladder's own refusal (its author converts it)",
+                       "studies.witness_study": "its report folder is --out-dir, refused with --quick in docs/",
+                       "devtools.action_path": "prints one step's path, writes no file",
+                       "devtools.motion_dump": "writes a .npz dump, not a report",
+                       "devtools.step_work": "prints the step's work counters, writes no file"}
+
+
+def test_every_command_with_quick_is_a_report_command_or_says_why_not():
+    for folder in ("studies", "devtools"):
+        for path in sorted((REPO / folder).glob("*.py")):
+            module, text = f"{folder}.{path.stem}", path.read_text()
+            if '"--quick"' in text or "report_command(" in text:
+                assert (module in REPORT_COMMANDS) == ("report_command(" in text), module
+                assert module in REPORT_COMMANDS or module in NOT_REPORT_COMMANDS, module
+    for command in provenance.REPORTS.values():  # every committed report's command
+        assert command.split()[2] in REPORT_COMMANDS or command.split()[2] in NOT_REPORT_COMMANDS, command
+
+
+@pytest.mark.parametrize("module", REPORT_COMMANDS)
+def test_quick_never_overwrites_a_committed_report(module, capsys):
+    """--quick into docs/ (or onto the README) is refused before any work, by every report command."""
+    root = Path(__file__).resolve().parents[2]
+    for target in (root / "docs" / "quick_must_not_exist.md", root / "README.md"):
+        before = target.read_bytes() if target.exists() else None
+        flag = "--report" if module == "studies.ppo_torch_report" else "--out"
+        with pytest.raises(SystemExit, match="never writes into docs/"):
+            importlib.import_module(module).main(["--quick", flag, str(target)])
+        assert (target.read_bytes() if target.exists() else None) == before
+
+
+def test_the_refusal_is_the_command_line_s(tmp_path):
+    """As users run it: exit status 1 and the reason on stderr."""
     import subprocess
     import sys
     root = Path(__file__).resolve().parents[2]
     target = root / "docs" / "quick_must_not_exist.md"
-    r = subprocess.run([sys.executable, "-m", module, "--quick", "--out", str(target)], cwd=root, capture_output=True,
-                       text=True, timeout=600, env=dict(os.environ, PYTHONPATH=str(root), NUMBA_ENABLE_CUDASIM="1"))
-    assert r.returncode != 0 and "never writes into docs/" in r.stderr, (r.stdout[-500:], r.stderr[-1500:])
+    r = subprocess.run([sys.executable, "-m", "studies.dynamics", "--quick", "--out", str(target)], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=600, env=dict(os.environ, PYTHONPATH=str(root)))
+    assert r.returncode == 1 and "never writes into docs/" in r.stderr, (r.stdout[-500:], r.stderr[-1500:])
     assert not target.exists()

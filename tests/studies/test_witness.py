@@ -13,7 +13,7 @@ gym = pytest.importorskip("gymnasium")
 import penny_env  # noqa: E402,F401
 from studies import witness as wt  # noqa: E402
 from studies import witness_study as ws  # noqa: E402
-from studies.stats import clopper_pearson, seed_clustered_ci  # noqa: E402
+from lab.stats import clopper_pearson, seed_clustered_ci  # noqa: E402
 from studies.verdict import ANCHORS, cell_verdict  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -278,8 +278,7 @@ def test_witness_study_quick_writes_only_its_folder(tmp_path):
 
 
 def test_readme_answer_is_the_verdict_tables():
-    """The README's answer is computed from the committed verdict table (docs/witnesses.csv) and the RL
-    study's rows (docs/study.csv), not typed."""
+    """The README's answer is computed from the committed verdict table (docs/witnesses.csv), not typed."""
     text = (ROOT / "README.md").read_text()
     assert ws.README_BEGIN in text and ws.README_END in text
     assert "<!-- study-answer" not in text  # the old RL-comparison verdict is gone

@@ -1,9 +1,8 @@
-"""training.ppo_torch (issue 22.6): the compact PPO in torch over the native vector env, and
-studies.ppo_compare, its comparison with SB3's PPO."""
+"""training.ppo_torch: the compact PPO in torch over the native vector env (devtools.ppo_speed times it beside
+SB3's PPO)."""
 import csv
 import json
 import math
-import tempfile
 
 import numpy as np
 import pytest
@@ -221,29 +220,3 @@ def test_auto_device_follows_cuda():
     assert ppo_torch.resolve_device("cpu").type == "cpu"
 
 
-# -- the comparison with SB3 ------------------------------------------------------------------------
-def test_compare_quick_writes_report_and_plot_outside_docs(reports_untouched, capsys):
-    pytest.importorskip("stable_baselines3", reason="SB3 is not installed (the penny-env[train] extra)")
-    pytest.importorskip("matplotlib", reason="matplotlib is not installed (the penny-env[plot] extra)")
-    from studies import ppo_compare
-    results = ppo_compare.main(["--quick"])
-    printed = capsys.readouterr().out
-    from pathlib import Path
-    report = next(line for line in printed.splitlines() if line.startswith("wrote ") and line.endswith(".md"))[6:]
-    assert Path(tempfile.gettempdir()).resolve() in Path(report).resolve().parents
-    md = Path(report).read_text()
-    assert "- sources: sha256 " in md and "- command: `python -m studies.ppo_compare --quick`" in md
-    assert "Throughput ratio, training.ppo_torch / SB3" in md
-    assert Path(report).with_suffix(".png").is_file()
-    for key in ("torch", "sb3"):
-        [r] = results[key]
-        assert r["steps"] >= 4096 and r["seconds"] > 0 and 0 <= r["eval"]["success_rate"] <= 1
-        assert 0 < r["env_seconds"] and 0 < r["update_seconds"] and r["env_seconds"] + r["update_seconds"] < r["seconds"]
-    assert "Where the wall time goes" in md
-
-
-def test_compare_quick_refuses_docs(capsys):
-    from studies import ppo_compare
-    with pytest.raises(SystemExit):
-        ppo_compare.main(["--quick", "--out", "docs/ppo_torch.md"])
-    assert "never writes into docs" in capsys.readouterr().err

@@ -75,6 +75,8 @@ class TaskRecord:
     extra_obs: tuple = ()          # ((low, high), ...) of the entries ``observation`` writes
     marked_arc: Callable | None = None
     needs_walls: bool = False      # the task is meaningless on the open plane (the impacts task)
+    goal: bool = False             # success is the contact point within task.tolerance of the target, which the
+    #                                observation holds as obs[8:10] (reach): goal_env=True relabels goals with it
 
     @property
     def obs_dim(self) -> int:

@@ -110,5 +110,5 @@ def target(k, p, m, s, trig, base, xp):
     return tx, ty, cb, sb
 
 
-RECORD = TaskRecord("reach", ReachTask, constants, reward, target)
+RECORD = TaskRecord("reach", ReachTask, constants, reward, target, goal=True)
 add_task(RECORD)

@@ -1,6 +1,6 @@
 """Resumable jobs of a study: each job writes its folder and, last, result.json (atomically); a rerun skips the jobs
 whose result.json was made by the same job config. They run in a process pool on the local cores or as Ray tasks
-(RAY_ADDRESS, or a local Ray instance). Used by studies/study.py and studies/ladder.py."""
+(RAY_ADDRESS, or a local Ray instance). Used by studies/ladder.py."""
 from __future__ import annotations
 
 import json
