@@ -1,4 +1,4 @@
-"""What the ladder's agents of issue 36 (her_sac, start_curriculum, go_explore) compute on their own side of the env:
+"""What the ladder's agents (ppo_heading, her_sac, the witness-guided runs) compute on their own side of the env:
 the task's published constants, the observation decoded into physical units, agent-side features, the agents' own
 action heads (a heading PD law for the steering torque, a rolling-speed P law for the rolling torque) and a
 protocol :class:`~training.protocol.Policy` around a deterministic actor.

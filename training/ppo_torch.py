@@ -16,7 +16,7 @@ The hyperparameters default to those of configs/train/ppo_reach_ellipse.yaml and
 coefficient 0.5, gradient norm 0.5, advantages normalised per minibatch, separate 64-64 tanh MLPs for the
 actor mean and the critic with orthogonal initialisation, and a state-independent log-std starting at 0.
 
-**The ladder's configuration** (issue 36; ``ladder_args()``, ``--ladder``): the fast configuration on a CPU
+**The ladder's configuration** (``ladder_args()``, ``--ladder``): the fast configuration on a CPU
 (``FAST_CPU``, ``--fast``: 4096 envs x 32 steps, 2 epochs of minibatches of 16384: 16 gradient steps per rollout
 of 131,072 transitions; the update's cost is samples x epochs, so this halves the 4-epoch setting's), gamma 0.999,
 the fair reward (training/protocol.py's FAIR_REWARD, ``fair_reward``: the success bonus only, on top of env_kwargs, in the
@@ -663,21 +663,10 @@ def parse_args(argv=None, ap=None) -> Args:
 
 
 def parse_sets(items) -> dict:
-    """{field: value} from FIELD=VALUE strings, values read as YAML ("0.5" a float, "{kind: circle}" a dict)."""
-    import yaml
-
-    from penny_env.envs.yaml_io import safe_load as yaml_load  # (1e-2 read as a float, as in YAML 1.2)
-    out = {}
-    for item in items:
-        if "=" not in item or not item.split("=", 1)[0].strip():
-            raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
-        key, value = item.split("=", 1)
-        try:
-            out[key.strip()] = yaml_load(value)
-        except yaml.YAMLError as exc:
-            raise ValueError(f"--set {item!r}: the value {value!r} is not valid YAML ({' '.join(str(exc).split())}); "
-                             "quote it in the shell, e.g. --set 'table={kind: circle, radius: 0.2}'") from None
-    return out
+    """{field: value} from FIELD=VALUE strings, values read as YAML 1.2 ("0.5" a float, "{kind: circle}" a dict): the
+    agents' one parser (training/agent_cli.parse_pairs)."""
+    from training.agent_cli import parse_pairs
+    return parse_pairs(items, "--set")
 
 
 def main(argv=None):

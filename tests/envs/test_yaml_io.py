@@ -1,5 +1,5 @@
 """penny_env's YAML reader (penny_env/envs/yaml_io.py), which every config file goes through (scenes, tasks,
-training.train, studies.study, the ladder): aliases are checked as the shared values they are, never walked
+training.train, the ladder): aliases are checked as the shared values they are, never walked
 expanded."""
 import time
 

@@ -87,12 +87,12 @@ def test_a_scene_file_that_cannot_be_read_is_named(tmp_path):
         PennyEnv(scene=str(twice))
 
 
-def test_the_study_config_and_ppo_torch_sets_are_named_too(tmp_path):
-    from studies import study
+def test_the_ladder_config_and_ppo_torch_sets_are_named_too(tmp_path):
+    from studies import ladder
     from training import ppo_torch
-    latin = tmp_path / "study.yaml"
+    latin = tmp_path / "ladder.yaml"
     latin.write_bytes(b"cells: all\n# \xff\n")
-    with pytest.raises(ValueError, match=r"study config .*is not UTF-8 text"):
-        study.load_config(latin)
+    with pytest.raises(ValueError, match=r"ladder config .*is not UTF-8 text"):
+        ladder.load_config(latin)
     with pytest.raises(ValueError, match=r"--set 'table=\{kind: circle': the value .* is not valid YAML"):
         ppo_torch.parse_sets(["table={kind: circle"])

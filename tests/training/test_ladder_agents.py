@@ -1,5 +1,5 @@
-"""The ladder's unprivileged agents (issue 36): training.ppo_torch (the ladder's configuration), training.ppo_heading
-and training.ppo_rnd follow training/protocol.py (checkpoints at the right env-step counts, a deterministic
+"""The ladder's unprivileged agents: training.ppo_torch (the ladder's configuration) and training.ppo_heading
+follow training/protocol.py (checkpoints at the right env-step counts, a deterministic
 Policy that training.protocol.evaluate runs, a success rate in [0, 1]), and none succeeds on the plane, where the
 theorems say no agent can (the negative control). Tiny budgets: seconds each."""
 import math
