@@ -88,8 +88,8 @@ def reward_fields(env_id: str, overrides=None) -> dict:
     from penny_env.envs.scene import env_presets
     from penny_env.step.tasks import config_fields
     spec = {**env_presets()[env_id], **(overrides or {})}
-    from penny_env.envs.scene import _preset
-    kind = spec.get("kind", _preset("task", spec["task"]).get("kind", "reach"))
+    from penny_env.envs.scene import preset_dict
+    kind = spec.get("kind", preset_dict("task", spec["task"]).get("kind", "reach"))
     fields = config_fields(kind)
     return {k: v for k, v in REWARD.items() if k in fields}
 AGENTS = ("ppo", "sac", "sac_witness")
