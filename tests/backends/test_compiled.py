@@ -17,7 +17,7 @@ from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import SolverSettings
 from penny_env.physics.scalar import advance_interval, flow_penny
-from conftest import random_inside_state
+from conftest import random_inside_state, random_pennies
 
 pytestmark = pytest.mark.skipif(not available(), reason="numba is not installed")
 
@@ -35,9 +35,7 @@ def test_compiled_equals_python_loop_and_scalar(seed, table, law, steer, dt):
     params = pe.PennyParams()
     law = make_law(law)
     n = 6
-    S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
-    acc1 = rng.normal(0, 3, n) * steer
-    acc2 = rng.normal(0, 3, n)
+    S, acc1, acc2 = random_pennies(rng, params, table, n, steer)
     ref, log, _ = advance_pennies(S, acc1, acc2, dt, params, table, law, SET, backend="python")
     trig = np.empty((4, n))
     out, clog = CompiledBatch(params, table, law, SET).states_and_impacts(S, acc1, acc2, dt, trig)
