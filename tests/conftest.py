@@ -122,11 +122,16 @@ def random_inside_state(rng, params, table, speed=10.0, spin=2.0, margin=0.0):
     raise RuntimeError("no inside state found")
 
 
-def random_pennies(rng, params, table, n, steer=True):
-    """(S (6, n), acc1, acc2): n states inside the table (:func:`random_inside_state`) and accelerations drawn
-    after them, normal with deviation 3; acc1 zero unless steer."""
+def random_pennies(seed, table, law, n, steer=True):
+    """(rng, params, law, S (6, n), acc1, acc2) of a property test's case: the default PennyParams, the law made
+    (laws.make_law), n states inside the table (:func:`random_inside_state`) and accelerations drawn after them,
+    normal with deviation 3 (acc1 zero unless steer), from numpy's generator seeded with seed."""
+    import penny_env as pe
+    from penny_env.physics.laws import make_law
+    rng = np.random.default_rng(seed)
+    params = pe.PennyParams()
     S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
-    return S, rng.normal(0, 3, n) * steer, rng.normal(0, 3, n)
+    return rng, params, make_law(law), S, rng.normal(0, 3, n) * steer, rng.normal(0, 3, n)
 
 
 @pytest.fixture

@@ -31,11 +31,8 @@ SET = SolverSettings()
 @given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
        steer=st.booleans(), dt=st.sampled_from([0.05, 0.5, 3.0]))
 def test_compiled_equals_python_loop_and_scalar(seed, table, law, steer, dt):
-    rng = np.random.default_rng(seed)
-    params = pe.PennyParams()
-    law = make_law(law)
     n = 6
-    S, acc1, acc2 = random_pennies(rng, params, table, n, steer)
+    rng, params, law, S, acc1, acc2 = random_pennies(seed, table, law, n, steer)
     ref, log, _ = advance_pennies(S, acc1, acc2, dt, params, table, law, SET, backend="python")
     trig = np.empty((4, n))
     out, clog = CompiledBatch(params, table, law, SET).states_and_impacts(S, acc1, acc2, dt, trig)

@@ -22,12 +22,9 @@ BACKEND = "numba" if available() else "python"
 @given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
        steer=st.booleans(), dt=st.sampled_from([0.05, 0.5, 3.0]))
 def test_advance_scalar_equals_batch(seed, table, law, steer, dt):
-    rng = np.random.default_rng(seed)
-    params = pe.PennyParams()
-    law = make_law(law)
-    settings = SolverSettings()
     n = 5
-    S, acc1, acc2 = random_pennies(rng, params, table, n, steer)
+    rng, params, law, S, acc1, acc2 = random_pennies(seed, table, law, n, steer)
+    settings = SolverSettings()
     batch, log, elapsed = advance_pennies(S, acc1, acc2, dt, params, table, law, settings, backend=BACKEND)
     for i in range(n):
         s1, impacts, rests, el = advance_interval(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, settings)
