@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from penny_env.analysis.dynamics import _initial_states, lyapunov_exponents, reachable_set
+from penny_env.analysis.dynamics import initial_states, lyapunov_exponents, reachable_set
 from penny_env.physics import PennyParams, make_table
 
 TABLES = {"circle r = 0.2": {"kind": "circle", "radius": 0.2},
@@ -29,7 +29,7 @@ def main(argv=None):
     rng = np.random.default_rng(0)
     rows = []
     for name, table in TABLES.items():
-        S = _initial_states(table, n, rng, params)
+        S = initial_states(table, n, rng, params)
         res = lyapunov_exponents(S, t_final, table=table, n_checkpoints=20 if args.quick else 200, params=params)
         e = res.exponents[np.isfinite(res.exponents)]
         q = np.percentile(e, [10, 50, 90]) if e.size else [np.nan] * 3

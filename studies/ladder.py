@@ -229,9 +229,10 @@ def make_demos(runs, cell, pairs: int) -> Path:
 def run_job(job: dict, runs: str) -> dict:
     """Train the job's agent on its cell and evaluate it at its checkpoints (training.protocol.evaluate on the pair
     seeds); its result (the caller writes result.json)."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one job per core: the vector env's prange would oversubscribe
     import numba
     import torch
+    # one job per core: the vector env's prange would oversubscribe. The thread count in use, not NUMBA_NUM_THREADS:
+    # numba refuses a changed variable once its threads run (a job run in a process that stepped a vector env before)
     numba.set_num_threads(1)
     torch.set_num_threads(1)
     from training.protocol import evaluate, fair_reward_kwargs

@@ -67,6 +67,42 @@ else:
     settings.register_profile("ci", deadline=None, max_examples=60, derandomize=True)
     settings.load_profile("ci")
 
+
+def pytest_configure(config):
+    """Under pytest-xdist (``pytest -n 2``, the README's command): a test module runs whole on one worker, and the
+    modules that hold the slow tests are handed out first.
+
+    * The controller schedules by module (``--dist loadscope``, in collection order): a module's module-scoped
+      fixture (a quick study run, a venv with the README's install, a wheel) is built once, where tests split
+      between workers made each worker build it again (``--dist loadgroup`` would group marked tests only, but its
+      marks do not reach the node ids under pytest 9). The order is :func:`pytest_collection_modifyitems`'s.
+    * A worker shares its compiled builds with the other (shared_builds.py).
+    """
+    if getattr(config.option, "numprocesses", None) and getattr(config.option, "dist", "no") == "load":
+        config.option.dist = "loadscope"
+        config.option.loadscopereorder = False
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        from tests import shared_builds
+        shared_builds.install()
+
+
+def pytest_collection_modifyitems(config, items):
+    """In the test workers: the modules that hold a slow test or build a module-scoped fixture first, in their own
+    order, then the others: both workers start on the long modules and the many short ones fill in at the end, so
+    that neither waits alone for a long one begun last. (The same order in every worker: pytest-xdist checks that
+    they collected alike.)"""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+
+    def long(item):
+        info = getattr(item, "_fixtureinfo", None)
+        shared = any(d and d[-1].scope == "module" for d in (info.name2fixturedefs.values() if info else ()))
+        return shared or item.get_closest_marker("slow") is not None
+
+    first = {item.module.__name__ for item in items if hasattr(item, "module") and long(item)}
+    items.sort(key=lambda item: getattr(getattr(item, "module", None), "__name__", "") not in first)
+
+
 PAPER_STATE = np.array([0.0, 0.0, 0.0, np.pi / 2, 10.0, 0.2])
 
 
@@ -84,6 +120,18 @@ def random_inside_state(rng, params, table, speed=10.0, spin=2.0, margin=0.0):
         if ok:
             return np.array([x, y, rng.uniform(-3, 3), phi, rng.uniform(-speed, speed), rng.uniform(-spin, spin)])
     raise RuntimeError("no inside state found")
+
+
+def random_pennies(seed, table, law, n, steer=True):
+    """(rng, params, law, S (6, n), acc1, acc2) of a property test's case: the default PennyParams, the law made
+    (laws.make_law), n states inside the table (:func:`random_inside_state`) and accelerations drawn after them,
+    normal with deviation 3 (acc1 zero unless steer), from numpy's generator seeded with seed."""
+    import penny_env as pe
+    from penny_env.physics.laws import make_law
+    rng = np.random.default_rng(seed)
+    params = pe.PennyParams()
+    S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
+    return rng, params, make_law(law), S, rng.normal(0, 3, n) * steer, rng.normal(0, 3, n)
 
 
 @pytest.fixture

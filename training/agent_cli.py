@@ -248,9 +248,12 @@ def build_args(ap, a, args_class, checks, quick_args):
 
 def cli(prog: str, args_class, train, argv=None, quick_args=None, checks=None) -> dict:
     """Parse, check, hold the run folder's lock, train, evaluate (--eval), write results.json; returns ``train``'s
-    dict (with ``eval`` after --eval). The env's numba threads default to 1 (NUMBA_NUM_THREADS; torch's:
-    ``--hp torch_threads=N``)."""
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    dict (with ``eval`` after --eval). The env steps on one numba thread unless NUMBA_NUM_THREADS says otherwise
+    (torch's: ``--hp torch_threads=N``). The thread count in use is set, never the variable: numba refuses a changed
+    NUMBA_NUM_THREADS once its threads run (an agent called in a process that stepped a vector env before)."""
+    if "NUMBA_NUM_THREADS" not in os.environ:
+        import numba
+        numba.set_num_threads(1)
     ap = parser(prog, args_class)
     argv = list(sys.argv[1:] if argv is None else argv)
     a = ap.parse_args(argv)

@@ -135,7 +135,7 @@ def lyapunov_exponents(states, t_final: float, *, table, law="elastic", eps=1e-1
 
 
 # -- report -------------------------------------------------------------------------------------------
-def _initial_states(table, n, rng, params):
+def initial_states(table, n, rng, params):
     """n states inside the table near its centre, rolling at 5 to 15 rad/s, turning at -1 to 1 rad/s."""
     tab = make_table(table)
     r = 0.3 * (tab.inradius - params.R)

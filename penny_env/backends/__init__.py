@@ -4,6 +4,8 @@ The physics (penny_env/physics/) and the env step's stages (penny_env/step/funct
 plain Python and import no numba. This layer compiles them:
 
 ==================  ===========================================================================================
+stepping.py         the envs' one door into this layer: the backend's choice, the single env's step, the vector
+                    env's runner (CPU or CUDA), packed, announced and warm (envs/ imports nothing else here)
 builder.py          copies of plain functions for a target ("python", "cpu": numba, "cuda": numba-cuda), loops
                     over pennies (parallel on the CPU, kernels on CUDA); loud failures (BuildError)
 generated.py        generated source (loops, kernels, unpackers, the law dispatch) written to real files
@@ -18,11 +20,15 @@ packing.py          the step's constants as one float64 array, and their generat
 physics.py          the compiled physics for one (target, table kind)
 batch.py            CompiledBatch: batches of pennies over an interval (penny_env.batch, simulate's batches)
 env.py              the env step for one (target, table kind, task): a typed record of entry points
-cuda_env.py         the vector env's step resident on a GPU, and its CUDA-graph capture
+runner.py           the vector env's runner interface (Runner, a Protocol) and its CPU runner
+cuda_env.py         the vector env's step resident on a GPU (the CUDA runner), and its CUDA-graph capture
 ==================  ===========================================================================================
 
 One function per target and table kind returns a typed record of entry points:
-:func:`env_entry_points` (the env step) and :func:`batch_entry_points` (the batch loops).
+:func:`env_entry_points` (the env step) and :func:`batch_entry_points` (the batch loops). The few names a build
+puts into its namespace for the plain functions to call (a task's stages, a table's formulas, the constants'
+unpacker) are declared by the modules that call them (``BUILD_SUPPLIED``, physics/build_names.py), and every
+build checks that it supplies exactly those its copies call (builder.Builder.check_supplied).
 """
 from __future__ import annotations
 

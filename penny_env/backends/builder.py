@@ -33,6 +33,7 @@ import functools
 import inspect
 import types
 
+from ..physics.build_names import DECLARED, is_supplied
 from . import generated
 
 TARGETS = ("python", "cpu", "cuda")
@@ -105,6 +106,8 @@ class Builder:
         self.origin: dict = {}  # name -> the plain function whose copy the namespace holds under that name
         self._modules: dict = {}  # id(globals dict) -> (that dict, the namespace of its functions' copies)
         self._copies: dict = {}   # function -> its copy (copy_foreign), keyed on the function object itself
+        self.sources: list = []   # every plain function copied into the namespace (check_supplied reads their code)
+        self.supplied: set = set()  # the build-supplied names put in (supply; physics/build_names.py)
         self._jit = self._inline = None  # the python target copies without compiling
         if target == "cpu":
             import numba
@@ -121,7 +124,7 @@ class Builder:
             from . import cuda_math
             self.math = cuda_math.namespace()
             self._jit = self._inline = cuda.jit(device=True)
-            self.namespace["cuda"] = cuda
+            self.cuda = cuda
         else:
             from ..physics.kernels import SCALAR
             self.math = SCALAR
@@ -138,14 +141,51 @@ class Builder:
 
     def copy(self, f, *, inline=False, jit=None, suffix="", name=None, replaces=None):
         """The target's copy of plain function f with this build's namespace as its globals, stored in the
-        namespace under ``name`` (default f's name). inline: numba-inlined into its callers (CPU; device
-        functions are inlined by the CUDA compiler anyway). jit: another numba decorator. replaces: the plain
-        function this copy stands for (a table's formula in place of the dispatch over tables)."""
+        namespace under ``name`` (default f's name; a build-supplied name is put in as :meth:`supply` does).
+        inline: numba-inlined into its callers (CPU; device functions are inlined by the CUDA compiler anyway).
+        jit: another numba decorator. replaces: the plain function this copy stands for (a table's formula in
+        place of the dispatch over tables)."""
         compiler = jit or (self._inline if inline else self._jit)
         out = jit_copy(f, self.namespace, compiler, self.variant + suffix, math=self.math)
+        self.sources.append(f)
+        if (name or f.__name__) in DECLARED:
+            self.supply(name or f.__name__, out)
         self.namespace[name or f.__name__] = out
         self.origin[name or f.__name__] = replaces or f
         return out
+
+    def supply(self, name: str, value) -> None:
+        """``value`` into the namespace under a build-supplied name: one that a module declares in its
+        BUILD_SUPPLIED (physics/build_names.py); BuildError for any other name."""
+        if name not in DECLARED:
+            raise BuildError(f"{name!r} is not a build-supplied name: no module declares it in its BUILD_SUPPLIED "
+                             f"(declared: {sorted(DECLARED)})")
+        self.namespace[name] = value
+        self.supplied.add(name)
+
+    def extend(self, other: "Builder") -> None:
+        """Everything build ``other`` holds (its namespace, copies and supplied names), as the start of this one
+        (the env step's build starts from the physics')."""
+        self.namespace.update({k: v for k, v in other.namespace.items() if k != "__builtins__"})
+        self.origin.update(other.origin)
+        self.sources += other.sources
+        self.supplied |= other.supplied
+
+    def check_supplied(self) -> None:
+        """BuildError unless this build supplies exactly the build-supplied names its copies call: every name
+        that a copied function calls and its module binds to a stand-in (physics/build_names.py) is supplied,
+        and every supplied name is called by some copy. A build that lacked one would compile a call of the
+        stand-in; one that supplied a name nothing calls is declared wrong."""
+        called = set()
+        for f in self.sources:
+            g = f.__globals__
+            called.update(n for n in code_names(f.__code__) if is_supplied(g.get(n)))
+        missing, unused = called - self.supplied, self.supplied - called
+        if missing or unused:
+            raise BuildError(f"build {self.variant!r} ({self.target}): "
+                             + "; ".join(([f"its copies call {sorted(missing)}, which it does not supply"] if missing
+                                          else []) + ([f"it supplies {sorted(unused)}, which no copy calls"] if unused
+                                                      else [])))
 
     def copy_foreign(self, f, name):
         """A copy of f itself, a function of another module (a task's stage, maybe a user's: a closure, a lambda,
@@ -156,12 +196,13 @@ class Builder:
         function it reaches that was defined in another module of the same top-level package, or of penny_env
         (a built-in task's helper), is copied with that function's own globals."""
         out = self._foreign_copy(f)
-        self.namespace[name] = out
+        self.supply(name, out)
         return out
 
     def _foreign_copy(self, f):
         """The copy of function f (once per build and function object) with :meth:`_globals_namespace`."""
         if f not in self._copies:
+            self.sources.append(f)
             self._copies[f] = jit_copy(f, self._globals_namespace(f.__globals__), self._jit, self.variant,
                                        math=self.math)
         return self._copies[f]
@@ -232,7 +273,7 @@ class Builder:
                   f'{loop.__module__}.{loop.__qualname__}."""\n\n\n'
                   f"def {name}({args}):\n    i = cuda.grid(1)\n    if i < {count}:\n        {body}(i, {args})\n\n\n"
                   f"def {loop.__name__}_count({args}):\n    return {count}\n")
-        scope = generated.define(name, source, dict(self.namespace), loop.__module__)
+        scope = generated.define(name, source, dict(self.namespace, cuda=cuda), loop.__module__)
         import numba
         # (numba's CUDA simulator runs the kernels as Python: it has no registers to cap)
         options = {} if max_registers is None or numba.config.ENABLE_CUDASIM else {"max_registers": int(max_registers)}
@@ -500,6 +541,15 @@ def inline_source(stmts, functions, taken, where="inline_source"):
     if missing:
         raise BuildError(f"{where}: no call of {sorted(missing)} to paste in (the loop's body changed shape)")
     return out
+
+
+def code_names(code) -> set:
+    """The global and attribute names a code object and the code nested in it (comprehensions) load."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= code_names(const)
+    return names
 
 
 @functools.lru_cache(maxsize=None)

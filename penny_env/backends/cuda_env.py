@@ -27,7 +27,7 @@ import numpy as np
 
 from ..physics.scalar import ImpactBuffers
 from ..step.functional import SAME_STEP, EnvState, StepResults, check_actions
-from .runner import StepOutputs, reset_outputs
+from .runner import RunnerOptions, StepOutputs, StepSpec, reset_outputs
 
 
 def torch_available_on_cuda() -> bool:
@@ -39,10 +39,12 @@ def torch_available_on_cuda() -> bool:
 
 
 class DeviceStep:
-    """The runner of a PennyVectorEnv with backend="cuda" (backends/runner.py's interface; the module docstring)."""
+    """The runner of a PennyVectorEnv with backend="cuda" (backends/runner.Runner; the module docstring)."""
 
-    def __init__(self, fns, consts, p, m, core, n, K, device=None, outputs="torch", kernels="split"):
+    def __init__(self, spec: StepSpec, n: int, K: int, options: RunnerOptions = RunnerOptions(outputs="torch")):
         from numba import cuda
+        device, outputs, kernels = options
+        fns, consts, p, m = spec.fns, spec.consts, spec.p, spec.m
         if outputs not in ("torch", "numpy", "device"):
             raise ValueError(f"outputs must be 'torch', 'device' or 'numpy', got {outputs!r}")
         if kernels not in ("split", "one"):
@@ -57,12 +59,13 @@ class DeviceStep:
                 raise ValueError(f"device must be in [0, {len(cuda.gpus)}) (the CUDA devices here), got {device}")
             cuda.select_device(int(device))
         self.cuda = cuda
+        self.spec = spec
         self.device = 0 if device is None else int(device)
         self.outputs = outputs
         self.fns = fns
         self.p = p
-        d = core.obs_dim
-        self.n, self.K, self.obs_dim, self.n_act = n, K, d, core.n_act
+        d = spec.obs_dim
+        self.n, self.K, self.obs_dim, self.n_act = n, K, d, spec.n_act
         self.same_step = p.autoreset == SAME_STEP
         self.torch = None
         if outputs == "torch" or torch_available_on_cuda():
@@ -80,7 +83,7 @@ class DeviceStep:
         self.kernels = kernels
         self.work = alloc(n, np.int64)      # the rare kernel's list of envs (backends/env.py, fast_step_env)
         self.work_count = alloc(1, np.int64)  # its length (cleared by each step's first kernel)
-        k = core.k
+        k = spec.k
         if kernels == "split":
             clear = self.fns.clear_work_count.prepare(self.work_count)
             self.launches = [(clear,
@@ -160,11 +163,12 @@ class DeviceStep:
             d.copy_to_device(np.ascontiguousarray(h))
 
     # -- the step ------------------------------------------------------------------------------------
-    def load_actions(self, actions):
-        """The actions into their device buffer, checked as far as the host can without a round trip: a
-        TypeError for a wrong type, a ValueError for a wrong shape; non-finite values are refused on the host
-        for host arrays and, with numpy outputs (which synchronize anyway), for device arrays of every kind;
-        otherwise (device outputs) they end the env's episode in the kernel (functional.LIMIT_ACTION)."""
+    def check_actions(self, actions):
+        """The actions checked as far as the host can without a round trip, as :meth:`step` copies them into their
+        device buffer: a TypeError for a wrong type, a ValueError for a wrong shape; non-finite values are refused
+        on the host for host arrays and, with numpy outputs (which synchronize anyway), for device arrays of every
+        kind; otherwise (device outputs) they end the env's episode in the kernel (functional.LIMIT_ACTION).
+        Returns (source, through_torch): the array to copy, and whether torch copies it."""
         shape = (self.n, self.n_act)
         torch = self.torch
         if torch is not None and isinstance(actions, torch.Tensor) and actions.is_cuda:
@@ -172,8 +176,7 @@ class DeviceStep:
             self._check_device_array(actions.dtype.is_floating_point, actions.dtype, tuple(actions.shape))
             if self.outputs == "numpy":  # (numpy outputs synchronize anyway: checked on the host as the CPU does)
                 check_actions(actions.detach().cpu().numpy(), shape, "actions")
-            self._actions_t().copy_(actions.reshape(shape))
-            return
+            return actions.reshape(shape), True
         if hasattr(actions, "copy_to_host") and hasattr(actions, "dtype") and not isinstance(actions, np.ndarray):
             # a numba device array (numba-cuda's, or its simulator's): copied on the device
             self._check_device_array(actions.dtype.kind == "f", actions.dtype, actions.shape)
@@ -181,22 +184,19 @@ class DeviceStep:
                 raise TypeError("actions as a numba device array must be float64 (or pass a torch tensor)")
             if self.outputs == "numpy":
                 check_actions(actions.copy_to_host(), shape, "actions")
-            self.actions.copy_to_device(actions.reshape(shape), stream=self.stream())
-            return
+            return actions.reshape(shape), False
         if hasattr(actions, "__cuda_array_interface__") and not isinstance(actions, np.ndarray):
             a = self.cuda.as_cuda_array(actions, sync=False)
             self._check_device_array(a.dtype.kind == "f", a.dtype, a.shape)
             if self.outputs == "numpy":
                 check_actions(a.copy_to_host(), shape, "actions")
             if a.dtype == np.float64 and a.is_c_contiguous():
-                self.actions.copy_to_device(a.reshape(shape), stream=self.stream())
-            elif torch is not None:
-                self._actions_t().copy_(torch.as_tensor(a, device=f"cuda:{self.device}").reshape(shape))
-            else:
-                raise TypeError("actions on the device without torch must be a C-contiguous float64 array")
-            return
+                return a.reshape(shape), False
+            if torch is not None:
+                return torch.as_tensor(a, device=f"cuda:{self.device}").reshape(shape), True
+            raise TypeError("actions on the device without torch must be a C-contiguous float64 array")
         a = check_actions(actions, shape, "actions")
-        self.actions.copy_to_device(np.ascontiguousarray(a, dtype=np.float64), stream=self.stream())
+        return np.ascontiguousarray(a, dtype=np.float64), False
 
     def _check_device_array(self, floating: bool, dtype, shape) -> None:
         """TypeError for a device array that is not floating point, ValueError for one of the wrong shape."""
@@ -217,10 +217,15 @@ class DeviceStep:
         for launch in self.launches[parity]:
             launch.launch(stream)
 
-    def step(self):
-        """One step on the device (module docstring), on the actions loaded; its outputs (StepOutputs) in the
-        outputs' type: views of the output set the step wrote (valid until the step after the next), or host
-        copies (outputs "numpy")."""
+    def step(self, actions):
+        """One step on the device (module docstring) on ``actions`` (as :meth:`check_actions` returns them),
+        copied into their buffer first; its outputs (StepOutputs) in the outputs' type: views of the output set the
+        step wrote (valid until the step after the next), or host copies (outputs "numpy")."""
+        source, through_torch = actions
+        if through_torch:
+            self._actions_t().copy_(source)
+        else:
+            self.actions.copy_to_device(source, stream=self.stream())
         parity = self.parity
         self.launch(parity)
         self.parity = parity ^ 1
@@ -230,6 +235,9 @@ class DeviceStep:
             return StepOutputs(host, buf.count.copy_to_host(), np.ascontiguousarray(buf.time.copy_to_host().T),
                                np.ascontiguousarray(buf.end.copy_to_host().T))
         return StepOutputs(out, buf.count, buf.time.T, buf.end.T)
+
+    def warm_up(self) -> None:
+        """Nothing more to load: the step's kernels were compiled when their launches were prepared."""
 
     def mask(self):
         """The info masks: new numpy arrays (outputs "numpy"), else one constant device array shared by every key."""

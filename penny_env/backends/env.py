@@ -17,7 +17,8 @@ import math
 
 import numpy as np
 
-from ..physics.scalar import FAULT_NONE, ImpactBuffers
+from ..physics.build_names import build_supplied
+from ..physics.scalar import FAULT_NONE, ImpactBuffers, flow_penny, period_is_free
 from ..step import draws, functional
 from ..step.functional import (NEXT_STEP, EnvState, PennyState, StepResults, actuate, angle_trig, clear_slots, conclude,
                                distance, env_row, env_step, initial_state, limit_of, observe_row, observe_rows,
@@ -26,10 +27,14 @@ from ..step.functional import (NEXT_STEP, EnvState, PennyState, StepResults, act
 from . import cache, generated, packing
 from .builder import Builder, check_target
 from .interrupts import compiling
-from .runner import observe_rows_packed, reset_rows_packed, step_envs_packed
 from .physics import build_variant, check_kind, physics_build, physics_modules, variant_key
 
 prange = range  # the loops below are kernels on CUDA (backends/builder.py)
+
+# what each build supplies to the entry points below: the unpacker of the packed constants generated for the task's
+# constants type (packing.unpacker), and on CUDA numba.cuda (the rare kernel's list is appended to atomically)
+BUILD_SUPPLIED = ("unpack", "cuda")
+unpack, cuda = build_supplied(__name__, BUILD_SUPPLIED)
 
 
 class EnvEntryPoints(NamedTuple):
@@ -53,12 +58,30 @@ class EnvEntryPoints(NamedTuple):
 
 
 # -- the entry points' bodies (plain Python; copied into each build) ------------------------------------------
+# the CPU loops' entry points: records from plain tuples (numba unboxes a plain tuple several times faster than a
+# NamedTuple), constants unpacked once per call
+def step_envs_packed(st, actions, consts, out, buf):
+    """The vector step (CPU and python): records from plain tuples, constants unpacked once."""
+    p, m, k = unpack(consts)
+    step_envs(EnvState(*st), actions, p, m, k, StepResults(*out), ImpactBuffers(*buf))
+
+
+def reset_rows_packed(rows, st, consts, obs):
+    p, m, k = unpack(consts)
+    reset_rows(rows, EnvState(*st), p, m, k, obs)
+
+
+def observe_rows_packed(rows, st, consts, obs):
+    p, m, k = unpack(consts)
+    observe_rows(rows, EnvState(*st), p, m, k, obs)
+
+
 def env_step_packed(st, a0, a1, consts, obs, buf):
     """env_step with st a plain tuple of PennyState's fields, buf a plain tuple of ImpactBuffers' arrays (one
     penny): the observation into row 0 of obs; returns the changed state fields (s, trig, count, dist, steps,
     time), the impact count, reward, terminated, truncated, kinetic energy and limit, flat (fewer objects for
     numba to box: the single env's whole step costs a few microseconds)."""
-    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
+    p, m, k = unpack(consts)
     b = ImpactBuffers(*buf)
     new, r, te, tu, e, lim = env_step(PennyState(*st), a0, a1, p, m, k, b, 0, obs, 0)
     return new.s, new.trig, new.count, new.dist, new.steps, new.time, b.count[0], r, te, tu, e, lim
@@ -66,7 +89,7 @@ def env_step_packed(st, a0, a1, consts, obs, buf):
 
 def initial_state_packed(key, episode, consts, obs):
     """initial_state of the single env: (s, trig, target, arc, dist); its observation into row 0 of obs."""
-    p, m, k = unpack(consts)  # noqa: F821
+    p, m, k = unpack(consts)
     st = initial_state(key, episode, p, m, k)
     write_observation(obs, 0, st, p, k)
     return st.s, st.trig, st.target, st.arc, st.dist
@@ -75,7 +98,7 @@ def initial_state_packed(key, episode, consts, obs):
 def observe_state_packed(st, consts, obs):
     """The single env at step 0 of PennyState st's state and target (reset options): (trig, dist); the
     observation into row 0 of obs."""
-    p, m, k = unpack(consts)  # noqa: F821
+    p, m, k = unpack(consts)
     st = PennyState(*st)
     trig = angle_trig(st.s)
     d = distance(st.s, st.target)
@@ -85,7 +108,7 @@ def observe_state_packed(st, consts, obs):
 
 def step_env_device(i, st, actions, consts, out, buf):
     """One env of the vector step on CUDA (one thread): the constants unpacked by the thread itself."""
-    p, m, k = unpack(consts)  # noqa: F821
+    p, m, k = unpack(consts)
     step_env(i, st, actions, p, m, k, out, buf)
 
 
@@ -95,7 +118,7 @@ def step_envs_device(st, actions, consts, out, buf):
 
 
 def reset_row_device(j, rows, st, consts, obs):
-    p, m, k = unpack(consts)  # noqa: F821
+    p, m, k = unpack(consts)
     reset_row(j, rows, st, p, m, k, obs)
 
 
@@ -105,7 +128,7 @@ def reset_rows_device(rows, st, consts, obs):
 
 
 def observe_row_device(j, rows, st, consts, obs):
-    p, m, k = unpack(consts)  # noqa: F821
+    p, m, k = unpack(consts)
     observe_row(j, rows, st, p, m, k, obs)
 
 
@@ -142,7 +165,7 @@ def clear_work_count(count):
 
 def enqueue(work, count, i, what):
     """Env i onto the rare kernel's list (atomic: threads append concurrently)."""
-    j = cuda.atomic.add(count, 0, 1)  # noqa: F821 (numba.cuda, in the CUDA build's namespace)
+    j = cuda.atomic.add(count, 0, 1)
     work[j] = 2 * i + what
 
 
@@ -159,8 +182,8 @@ def fast_step_env(i, st, actions, p, m, k, out, buf, work, count):
         a1 = actions[i, 1] if p.n_act == 2 else 0.0
         if math.isfinite(a0) and math.isfinite(a1):
             acc1, acc2, ctrl = actuate(a0, a1, p)
-            if p.plane or period_is_free(st_i.s, st_i.trig[2], st_i.trig[3], acc1, acc2, p.dt, m):  # noqa: F821
-                s1 = flow_penny(st_i.s, acc1, acc2, p.dt, m.R)  # noqa: F821
+            if p.plane or period_is_free(st_i.s, st_i.trig[2], st_i.trig[3], acc1, acc2, p.dt, m):
+                s1 = flow_penny(st_i.s, acc1, acc2, p.dt, m.R)
                 new, r, te, tu, e, lim = conclude(st_i, s1, p.dt, limit_of(s1, p.dt, FAULT_NONE, p), ctrl, 0, p, k,
                                                   obs, i)
                 if record_step(st, i, new, r, te, tu, e, lim, p, out):  # (the shared bookkeeping; the reset: rare kernel)
@@ -237,8 +260,7 @@ def env_modules(record) -> tuple:
     stages = [f for f in (record.reward, record.target, record.observation, record.marked_arc) if f is not None]
     task_modules = tuple(dict.fromkeys(m for m in (sys.modules.get(f.__module__) for f in stages)
                                        if m is not None and getattr(m, "__file__", None)))
-    from . import runner
-    return physics_modules() + (functional, draws, sys.modules[__name__], runner, packing) + task_modules
+    return physics_modules() + (functional, draws, sys.modules[__name__], packing) + task_modules
 
 
 def env_entry_points(target: str, kind: int, record, constants_type, fresh: bool = False,
@@ -275,8 +297,7 @@ def _build_entry_points(target, kind, record, constants_type, fresh, max_registe
     # (the variant's name ends with the sources' digest: numba names its cache files after it)
     variant = build_variant(target, kind, modules, record.name) if modules else "python"
     b = Builder(target, variant, cache=own)
-    b.namespace.update({k: v for k, v in phys.namespace.items() if k != "__builtins__"})
-    b.origin.update(phys.origin)
+    b.extend(phys)
     b.add({k: v for k, v in vars(functional).items() if not callable(v) or isinstance(v, type)})
     b.namespace.update(ImpactBuffers=ImpactBuffers, PennyState=PennyState, EnvState=EnvState,
                        StepResults=StepResults)
@@ -298,7 +319,7 @@ def _build_entry_points(target, kind, record, constants_type, fresh, max_registe
     records = (EnvParams, Model, constants_type)
     unpack = packing.unpacker(records)
     b.namespace.update(packing.record_names(records))
-    b.copy(unpack, inline=True)
+    b.copy(unpack, inline=True)  # (under its build-supplied name)
     b.copies((functional.clip_action, functional.angle_trig, functional.kinetic_energy, functional.distance,
               functional.observation, functional.actuate, functional.termination, functional.initial_state,
               functional.limit_of))
@@ -307,6 +328,7 @@ def _build_entry_points(target, kind, record, constants_type, fresh, max_registe
               functional.clear_slots, functional.write_outputs, functional.pending_reset, functional.same_step_reset,
               functional.record_step, functional.conclude), inline=True)
     if target == "cuda":
+        b.supply("cuda", b.cuda)
         b.namespace.update(FULL_STEP=FULL_STEP, RESET_ONLY=RESET_ONLY, math=math)
         b.copies((functional.transition, env_step, step_env, functional.reset_row, functional.observe_row,
                   step_env_device, reset_row_device, observe_row_device, enqueue, fast_step_env, rare_step_env,
@@ -331,13 +353,11 @@ def _build_entry_points(target, kind, record, constants_type, fresh, max_registe
         resets = b.loop(reset_rows, entry=reset_rows_packed, count=_rows_count)
         observes = b.loop(observe_rows, entry=observe_rows_packed, count=_rows_count)
         fast = rare = clear = None
-    out = EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack, fast, rare, clear)
-    return out
+    b.check_supplied()
+    return EnvEntryPoints(target, single, initial, observe_state, step, resets, observes, unpack, fast, rare, clear)
 
 
 def cuda_launch_functions(entry: EnvEntryPoints) -> dict:
     """The CUDA kernels of ``entry`` by name (for the PTX tests and the register report)."""
     return {"step_envs": entry.step_envs, "reset_rows": entry.reset_rows, "observe_rows": entry.observe_rows}
 
-
-_ = generated  # (generated source: the unpacker, the loops)

@@ -20,10 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ..physics.build_names import build_supplied
+from ..physics.scalar import flow_penny, table_constants_of
 from . import cache, generated
 from .interrupts import compiling, load_numba
 from .builder import Builder, check_target
 from .checks import recheck_law
+
+# the table's formulas, which a build for one table kind supplies (its registered terms, Hessian and ray)
+BUILD_SUPPLIED = ("table_terms", "table_hess", "table_ray")
+table_terms, table_hess, table_ray = build_supplied(__name__, BUILD_SUPPLIED)
 
 
 def variant_name(kind: int) -> str:
@@ -106,27 +112,27 @@ def _no_ray(m, c, s):
 
 def _table_wall_terms(m, x, y):
     """scalar.wall_terms for the one table kind a build is for (table_terms: its formula)."""
-    return table_terms(table_constants_of(m), x, y)  # noqa: F821  (in the build's namespace)
+    return table_terms(table_constants_of(m), x, y)
 
 
 def _table_wall_hess(m, x, y):
-    return table_hess(table_constants_of(m), x, y)  # noqa: F821
+    return table_hess(table_constants_of(m), x, y)
 
 
 def _table_wall_distance(m, c, s):
     """scalar.wall_distance for the one table kind a build is for: its ray formula."""
-    return table_ray(table_constants_of(m), c, s)  # noqa: F821
+    return table_ray(table_constants_of(m), c, s)
 
 
 def plane_advance_into(s, acc1, acc2, dt, m, stop_after, buf, row, base, arc):
     """scalar.advance_into in the open plane's builds: one flow, the whole motion where there is no wall (and
     run_interval never calls it there). It keeps the event loop out of the plane's machine code."""
-    return flow_penny(s, acc1, acc2, dt, m.R), dt  # noqa: F821  (in the build's namespace)
+    return flow_penny(s, acc1, acc2, dt, m.R), dt
 
 
 def plane_advance_through_into(s, acc1, acc2, dt, m, stop_after, buf, row, arc):
     """scalar.advance_through_into in the open plane's builds (see :func:`plane_advance_into`)."""
-    return flow_penny(s, acc1, acc2, dt, m.R), dt  # noqa: F821
+    return flow_penny(s, acc1, acc2, dt, m.R), dt
 
 
 def law_dispatch_source(indices) -> str:
@@ -220,11 +226,12 @@ def _physics_build(target, kind, law=-1):
     # list), and the laws' dispatch in place of scalar.law_terms
     if kind >= 0:
         terms, hess, ray = COMPILED_FORMULAS[kind]
-        b.namespace["table_terms"], b.namespace["table_hess"] = formula(terms), formula(hess)
+        b.supply("table_terms", formula(terms))
+        b.supply("table_hess", formula(hess))
         b.copy(_table_wall_terms, name="wall_terms", replaces=scalar.wall_terms)
         b.copy(_table_wall_hess, name="wall_hess", replaces=scalar.wall_hess)
         if ray is not None:
-            b.namespace["table_ray"] = formula(ray)
+            b.supply("table_ray", formula(ray))
             b.copy(_table_wall_distance, name="wall_distance", replaces=scalar.wall_distance)
         else:
             b.copy(scalar.wall_distance_bisection, name="wall_distance", replaces=scalar.wall_distance)
@@ -254,4 +261,5 @@ def _physics_build(target, kind, law=-1):
     functions["advance_batch"] = b.loop(batch_loops.advance_batch, inline=(scalar.run_interval,))
     functions["first_impact_batch"] = b.loop(batch_loops.first_impact_batch)
     b.functions = functions
+    b.check_supplied()
     return b

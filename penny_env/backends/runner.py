@@ -1,26 +1,15 @@
-"""The vector step's runners: one interface, behind which the CPU loop and the CUDA kernels sit.
+"""The vector step's runners: one interface (:class:`Runner`), behind which the CPU loop and the CUDA kernels sit.
 
 A runner holds the N envs' state (step/functional.EnvState) where its target computes (numpy arrays on the host;
 device arrays on a GPU: backends/cuda_env.DeviceStep) and runs the step built for its target
-(backends/env.EnvEntryPoints). PennyVectorEnv talks to every target through these methods only, and builds the
-info from what :meth:`step` and :meth:`reset` return, with one builder for every array type
-(envs/vector_env.py):
-
-====================================  =============================================================================
-``load_actions(actions)``             the actions checked (TypeError / ValueError naming the sub-env) and stored
-``step() -> StepOutputs``             one step of every env, autoreset included, in the runner's array type
-``reset(keys, episodes, rows,         episodes drawn for ``rows`` (reset options applied); (obs, StepOutputs of the
-states, targets)``                    reset's info)
-``mask()``                            an info mask of every env (``_key``), in the runner's array type
-``host(name)``                        a field of the state as a numpy array (a copy on a GPU)
-``state_to_host()``,                  the whole state as numpy arrays and back (pickling)
-``state_from_host(st)``
-``outputs``                           "numpy", "torch" or "device": the array type of what the runner returns
-====================================  =============================================================================
+(backends/env.EnvEntryPoints). Every runner is made as ``Runner(spec, n, K, options)`` by
+backends/stepping.make_runner, the one door of the envs into the backends; PennyVectorEnv talks to it through
+the methods of :class:`Runner` only, and builds the info from what :meth:`Runner.step` and :meth:`Runner.reset`
+return, with one builder for every array type (envs/vector_env.py).
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -29,22 +18,65 @@ from . import threads
 from .interrupts import compiling, overloads
 
 
-# -- the CPU loops' entry points (plain Python, copied into each build by backends/env.py): records from plain
-# tuples (numba unboxes a plain tuple several times faster than a NamedTuple), constants unpacked once per call
-def step_envs_packed(st, actions, consts, out, buf):
-    """The vector step (CPU and python): records from plain tuples, constants unpacked once."""
-    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
-    step_envs(EnvState(*st), actions, p, m, k, StepResults(*out), ImpactBuffers(*buf))  # noqa: F821
+class StepSpec(NamedTuple):
+    """What a runner steps (made by backends/stepping.make_runner): the entry points built for its target
+    (env.EnvEntryPoints), the constants packed (packing.pack) and the records they pack (functional.EnvParams
+    ``p``, scalar.Model ``m``, the task's constants ``k``), the observation's and the action's widths, whether
+    the task counts impacts on its marked arc, and the audit of a user's registered table (or None)."""
+
+    fns: object
+    consts: np.ndarray
+    p: tuple
+    m: tuple
+    k: tuple
+    obs_dim: int
+    n_act: int
+    counts_arc: bool
+    audit: object = None
 
 
-def reset_rows_packed(rows, st, consts, obs):
-    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
-    reset_rows(rows, EnvState(*st), p, m, k, obs)  # noqa: F821
+class RunnerOptions(NamedTuple):
+    """Where and how a runner steps: the CUDA device index (None: the current one), the outputs' array type
+    ("numpy", "torch" or "device") and the CUDA step's kernels ("split" or "one"). The CPU runner takes the
+    defaults only (numpy outputs)."""
+
+    device: int | None = None
+    outputs: str = "numpy"
+    kernels: str = "split"
 
 
-def observe_rows_packed(rows, st, consts, obs):
-    p, m, k = unpack(consts)  # noqa: F821 (the build's generated unpacker)
-    observe_rows(rows, EnvState(*st), p, m, k, obs)  # noqa: F821
+class Runner(Protocol):
+    """The vector step of N envs on one target, as PennyVectorEnv uses it (CpuRunner, cuda_env.DeviceStep)."""
+
+    outputs: str  # "numpy", "torch" or "device": the array type of what the runner returns
+    spec: StepSpec  # what it steps (its constructor's)
+
+    def __init__(self, spec: StepSpec, n: int, K: int, options: RunnerOptions) -> None:
+        """N envs' state, zeroed, and the step of ``spec`` for them; K: the impact slots each step reports."""
+
+    def check_actions(self, actions):
+        """The actions as :meth:`step` takes them; TypeError / ValueError naming the sub-env, nothing changed."""
+
+    def step(self, actions) -> StepOutputs:
+        """One step of every env on checked actions, autoreset included, in the runner's array type."""
+
+    def reset(self, keys, episodes, rows, states=None, targets=None) -> tuple:
+        """Episodes drawn for ``rows`` (reset options applied); (obs, StepOutputs of the reset's info)."""
+
+    def warm_up(self) -> None:
+        """Every compiled function a step or a reset can call, loaded (or compiled) now, not inside a step."""
+
+    def mask(self):
+        """An info mask of every env (``_key``), in the runner's array type."""
+
+    def host(self, name: str) -> np.ndarray:
+        """A field of the state as a numpy array (a copy on a GPU)."""
+
+    def state_to_host(self) -> EnvState:
+        """The whole state as numpy arrays (pickling)."""
+
+    def state_from_host(self, st) -> None:
+        """The whole state from numpy arrays (unpickling)."""
 
 
 class StepOutputs(NamedTuple):
@@ -81,28 +113,35 @@ class CpuRunner:
 
     outputs = "numpy"
 
-    def __init__(self, fns, consts, p, n: int, K: int, obs_dim: int, n_act: int, counts_arc: bool, audit=None):
-        self.fns, self.consts, self.p, self.audit = fns, consts, p, audit
-        self.n, self.K, self.obs_dim, self.n_act, self.counts_arc = n, K, obs_dim, n_act, counts_arc
+    def __init__(self, spec: StepSpec, n: int, K: int, options: RunnerOptions = RunnerOptions()):
+        if options != RunnerOptions():
+            raise ValueError(f"the CPU runner takes no device, numpy outputs and no CUDA kernels, got {options}")
+        fns, p, obs_dim = spec.fns, spec.p, spec.obs_dim
+        self.spec = spec
+        self.fns, self.consts, self.p, self.audit = fns, spec.consts, p, spec.audit
+        self.n, self.K, self.obs_dim, self.n_act, self.counts_arc = n, K, obs_dim, spec.n_act, spec.counts_arc
         self.same_step = p.autoreset == SAME_STEP
         self.st = new_state(n)
-        self.actions = np.zeros((n, n_act))
         self.mask = np.ones(n, dtype=bool).copy  # (an info mask: a new array each call, a copy costs a third of np.ones)
         serial = getattr(fns.step_envs, "serial", None)
         # fewer envs than threads.SERIAL_BELOW: the serial loop, called directly (threads.locked)
         self.step_envs = serial() if serial is not None and n < threads.SERIAL_BELOW else fns.step_envs
+        # the dispatcher the steps will run: also the serial one in a forked child (threads.serial_now), where the
+        # parallel one is never built (what the compile notice names: backends/stepping.py)
+        self.dispatcher = (serial() if serial is not None and (threads.serial_now() or n < threads.SERIAL_BELOW)
+                           else getattr(fns.step_envs, "__wrapped__", fns.step_envs))
         # reused from step to step (the info returns none of them; a fresh array costs about 0.2 us, a fifth of the
         # step's host time at N = 1): the arc counts and guard faults, the done flags, the empty post-impact states
         # and rest flags (the env does not keep them), SAME_STEP's final observations, the counts' template
         final = (n if self.same_step else 0, obs_dim)
         # (post-impact states only where a user's table is audited at its impacts: physics/tables/registered.py)
-        Kp = K if audit is not None else 0
+        Kp = K if spec.audit is not None else 0
         self._scratch = (np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int8), np.empty(n, dtype=bool),
                          np.empty((Kp, 6, n)), np.empty((Kp, n), dtype=np.int8), np.empty(final, dtype=np.float32),
                          np.full(n, K, dtype=np.int64), np.empty(n, dtype=np.int64))
 
-    def load_actions(self, actions) -> None:
-        self.actions = check_actions(actions, (self.n, self.n_act), "actions")  # the step clips, as PennyEnv does
+    def check_actions(self, actions):
+        return check_actions(actions, (self.n, self.n_act), "actions")  # (the step clips, as PennyEnv does)
 
     def buffers(self, n=None):
         """Fresh step outputs (functional.StepResults' arrays as a plain tuple) and impact buffers: the impact slots
@@ -122,9 +161,9 @@ class CpuRunner:
         buf = (full.copy(), times.T, ends.T, post, rest, arc, fault)  # (a copy: np.full costs 0.7 us, a copy 0.1)
         return out, buf, times, ends
 
-    def step(self) -> StepOutputs:
+    def step(self, actions) -> StepOutputs:
         out, buf, times, ends = self.buffers()
-        self.step_envs(tuple(self.st), self.actions, self.consts, out, buf)
+        self.step_envs(tuple(self.st), actions, self.consts, out, buf)
         # (the records made with tuple.__new__: the NamedTuples' own constructors cost a few per cent of a step at N = 1)
         if self.audit is not None:  # a user's registered shape: its formulas against its own h at a sample of impacts
             counts, post = buf[0], buf[3]
@@ -170,7 +209,6 @@ class CpuRunner:
                 obs = np.empty((n, self.obs_dim), dtype=np.float32)
                 self.fns.reset_rows(np.arange(rows), st, self.consts, obs)
                 self.fns.observe_rows(np.arange(rows), st, self.consts, obs)
-
 
     def host(self, name):
         return getattr(self.st, name)

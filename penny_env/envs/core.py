@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import SolverSettings
-from ..backends.checks import recheck_law
-from ..backends.interrupts import load_numba
+from ..backends import stepping
 from ..physics.faults import warn_episode_fault
 from ..physics.tables.registered import ImpactAudit, audited
 from ..physics.flows import end_kinematics
@@ -91,29 +90,11 @@ class Core:
         self.impacts = self.counts_arc  # (the name the renderer and the info use)
         self.obs_dim = self.task_record.obs_dim
         self.max_steps = task.max_episode_steps
-        if backend != "python":
-            load_numba()  # (with Ctrl-C held: backends/interrupts.py)
-        self.backend = self._backend(backend)  # "numba": the compiled step (functional.py), "python": as written
-        if self.backend == "python":  # (a compiled build tries its own copy: backends/physics.py)
-            recheck_law(self.law.update)  # a user's law as it is now, not only as it was registered
+        # "numba": the compiled step (functional.py), "python": as written (backends/stepping.env_backend)
+        self.backend = stepping.env_backend(backend, self.table, self.law)
         # a user's registered shape: a sample of the impacts compared with its own h (tables/registered.py)
         self.audit = ImpactAudit(self.table, self.R) if audited(self.table) else None
         self.ax, self.ay = scene.spawn_axes()
-
-    def _backend(self, backend):
-        """'numba' or 'python': 'auto' takes numba where it is installed and the table compiles
-        (backends.choice.choose_backend), else the plain-Python step with a warning naming it."""
-        from ..backends.choice import choose_backend
-        if backend not in ("auto", "numba", "python"):
-            raise ValueError(f"backend must be 'auto', 'numba' or 'python', got {backend!r}")
-        if backend == "python":
-            return "python"
-        chosen = choose_backend(backend, self.table, "scene.table", python="python")
-        if chosen == "python":
-            import warnings
-            warnings.warn("penny_env: the compiled step cannot run here (numba missing or a table that does not "
-                          "compile); using the plain-Python step (backend='python'), much slower", stacklevel=4)
-        return chosen
 
     def named_failure(self, exc, where: str):
         """A ValueError naming the scene's law or table when ``exc`` was raised inside the user's function (the
@@ -124,29 +105,13 @@ class Core:
     def entry_points(self, target=None, **options):
         """The env step's entry points (backends/env.py) for ``target`` ("python", "cpu", "cuda"; None: this
         core's backend) and this scene's table kind and task."""
-        from ..backends.env import env_entry_points
-        from ..physics.scalar import scalar_model
-        if target is None:
-            target = "cpu" if self.backend == "numba" else "python"
-        m = scalar_model(self.params, self.table, self.law, self.settings)
-        return env_entry_points(target, m.kind, self.task_record, type(self.k), law=m.law, **options)
+        return stepping.entry_points(self, target, **options)
 
     def draw_episodes(self, keys, episodes):
         """(S (6, N), target (2, N), arc (2, N)): the initial states, targets and marked arcs' directions of
         episodes ``episodes`` (N,) of the envs with seed keys ``keys`` (N,) uint64 (draws.seed_keys), drawn by
         the env step's own reset stage (functional.initial_state) on this core's backend."""
-        from ..backends.packing import pack
-        from ..physics.scalar import scalar_model
-        from ..step.functional import EnvState, env_params
-        keys = np.ascontiguousarray(keys, dtype=np.uint64)
-        n = keys.shape[0]
-        st = EnvState(np.zeros((6, n)), np.zeros((4, n)), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n, np.int64),
-                      np.zeros(n), np.zeros(n, np.int64), np.zeros(n), keys,
-                      np.ascontiguousarray(np.broadcast_to(episodes, (n,)), dtype=np.int64), np.zeros(n, bool))
-        m = scalar_model(self.params, self.table, self.law, self.settings)
-        obs = np.empty((n, self.obs_dim), dtype=np.float32)
-        self.entry_points().reset_rows(np.arange(n), tuple(st), pack(env_params(self), m, self.k), obs)
-        return st.S, st.target, st.arc
+        return stepping.draw_episodes(self, keys, episodes)
 
     def __getstate__(self):
         return {"scene": self.scene, "task": self.task, "settings": self.settings, "backend": self.backend}

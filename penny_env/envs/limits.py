@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..backends.memory import memory_left
+from ..backends.stepping import memory_left
 
 INT64_MAX = int(np.iinfo(np.int64).max)
 

@@ -9,16 +9,13 @@ import gymnasium as gym
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from ..backends.cache import announce_compile
-from ..backends.interrupts import compiling
-from ..backends.packing import pack
-from ..physics.scalar import impact_buffers, scalar_model
+from ..backends import stepping
+from ..physics.scalar import impact_buffers
 from .core import Core, check_seed, render_fps, seed_keys, warn_limits
-from ..step.functional import LIMIT_ACTION, LIMIT_LAW_NONFINITE, check_actions, env_params, kinetic_energy
+from ..step.functional import LIMIT_ACTION, LIMIT_LAW_NONFINITE, check_actions, kinetic_energy
 from .limits import check_int64, check_memory, single_env_bytes
 from .scene import resolve
 
-_WARM: set = set()  # the entry points (backends/env.EnvEntryPoints) called once in this process
 IMPACTS_BUFFER = 16  # impact times kept per step before a rerun with a larger buffer (PennyEnv)
 MAX_IMPACTS_IN_INFO = 8  # width of info["impact_times"] / ["impact_ends"] (as PennyVectorEnv's rows)
 
@@ -196,22 +193,11 @@ class PennyEnv(gym.Env):
 
     def _make_core(self):
         core = self._core = Core(self.scene, self.task, backend=self.backend)
-        # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes)
-        self._p = env_params(core, None if self.truncate else np.iinfo(np.int64).max)
-        self._m = scalar_model(core.params, core.table, core.law, core.settings)
-        self._fns = core.entry_points()
-        self._consts = pack(self._p, self._m, core.k)
+        # truncate=False: never (a wrapper, gymnasium's TimeLimit, ends the episodes). The step compiled (or loaded)
+        # now, not in the first step (backends/stepping.make_single)
+        spec = stepping.make_single(core, None if self.truncate else np.iinfo(np.int64).max)
+        self._p, self._m, self._fns, self._consts = spec.p, spec.m, spec.fns, spec.consts
         self._buffers(max(IMPACTS_BUFFER, self.max_impacts_in_info))
-        if core.backend == "numba":  # load the machine code now, not in the first step
-            announce_compile("single env step", "open plane" if core.table is None else type(core.table).__name__,
-                             self._m.kind, self._fns.env_step)
-            if self._fns not in _WARM:  # the first build of these entry points in this process compiles (or loads) them
-                with compiling():  # (a Ctrl-C is held until that is done: backends/interrupts.py)
-                    obs = np.empty((1, core.obs_dim), dtype=np.float32)
-                    s, trig, target, arc, d = self._fns.initial_state(np.uint64(0), 0, self._consts, obs)
-                    self._fns.observe_state((s, trig, target, arc, 0, d, 0, 0.0), self._consts, obs)
-                    self._fns.env_step((s, trig, target, arc, 0, d, 0, 0.0), 0.0, 0.0, self._consts, obs, self._buf_args)
-                    _WARM.add(self._fns)
 
     def _buffers(self, capacity):
         """The step's impact buffers (scalar.ImpactBuffers, one penny with ``capacity`` slots), and the plain

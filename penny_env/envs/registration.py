@@ -13,7 +13,7 @@ picklable factory whose unpickling imports penny_env) or the module-prefixed id
 """
 from __future__ import annotations
 
-from .scene import _preset, env_presets
+from .scene import env_presets, preset_dict
 
 ENTRY_POINT = "penny_env.envs.registration:make_registered_env"
 VECTOR_ENTRY_POINT = "penny_env.envs.vector_env:PennyVectorEnv"
@@ -75,7 +75,7 @@ def register_envs() -> list[str]:
     ids = []
     for env_id, kwargs in env_presets().items():
         kwargs = dict(kwargs)
-        task = _preset("task", kwargs.get("task", "reach"))
+        task = preset_dict("task", kwargs.get("task", "reach"))
         steps = kwargs.get("max_episode_steps", task.get("max_episode_steps", 400))
         if env_id not in registry:
             register(id=env_id, entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT,

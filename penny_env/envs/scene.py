@@ -248,7 +248,7 @@ def _yaml_load(path: Path) -> dict:
     return data
 
 
-def _preset(kind: str, name) -> dict:
+def preset_dict(kind: str, name) -> dict:
     """A scene/task dict from a preset name, a YAML path, a dict or a Scene/Task."""
     if isinstance(name, (Scene, Task)):
         return {f.name: getattr(name, f.name) for f in fields(name)}
@@ -307,8 +307,8 @@ def _build_task(data: dict, owner: str) -> Task:
 def resolve(scene="ellipse", task="reach", **overrides) -> tuple[Scene, Task]:
     """Validated (Scene, Task) from presets (names, YAML paths, dicts) and field overrides. A task field must
     be one of the fields of the task's kind (its registered record's configuration, step/tasks/)."""
-    sc = _preset("scene", scene)
-    tk = _preset("task", task)
+    sc = preset_dict("scene", scene)
+    tk = preset_dict("task", task)
     kind = overrides.get("kind", tk.get("kind", "reach"))
     task_fields = config_fields(task_record(kind).name)
     so = {k: v for k, v in overrides.items() if k in SCENE_FIELDS}

@@ -8,15 +8,9 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..backends import threads
-from ..backends.cache import announce_compile
-from ..backends.interrupts import load_numba
-from ..backends.choice import compiles
-from ..backends.packing import pack
-from ..backends.runner import CpuRunner, new_state
-from ..physics.scalar import scalar_model
+from ..backends import stepping
 from .core import Core, check_seed, render_fps, seed_keys, warn_limits, X, Y
-from ..step.functional import DISABLED, LIMIT_LAW_NONFINITE, LIMIT_TASK_OUTPUT, NEXT_STEP, SAME_STEP, env_params
+from ..step.functional import DISABLED, LIMIT_LAW_NONFINITE, LIMIT_TASK_OUTPUT, NEXT_STEP, SAME_STEP
 from .limits import check_int64, check_memory, vector_env_bytes
 from .scene import resolve
 
@@ -190,58 +184,16 @@ class PennyVectorEnv(VectorEnv):
             self._runner.state_from_host(host)
 
     def _make_core(self):
-        on_gpu = self._on_gpu()
-        core = self._core = Core(self.scene, self.task, backend="python" if on_gpu else self.backend)
-        if on_gpu and not compiles(core.table):
-            if self.backend == "cuda" or self.device is not None or self.outputs == "torch":
-                raise ValueError(f"backend='cuda': scene.table {type(core.table).__name__} has no compiled formulas "
-                                 "(registered tables with formulas and the open plane run on the GPU)")
-            on_gpu = False
-            core = self._core = Core(self.scene, self.task, backend=self.backend)
-        self._p = env_params(core, autoreset=AUTORESET_CODES[self.autoreset_mode])
-        self._m = scalar_model(core.params, core.table, core.law, core.settings)
-        self._consts = pack(self._p, self._m, core.k)
-        n, K = self.num_envs, self.max_impacts_in_info
-        if on_gpu:
-            from ..backends.cuda_env import DeviceStep
-            from ..backends.env import FAST_MAX_REGISTERS
-            outputs = self.outputs or ("torch" if self.backend == "cuda" else "numpy")
-            self._fns = core.entry_points("cuda", max_registers=self.cuda_options.get("max_registers", FAST_MAX_REGISTERS))
-            self._runner = DeviceStep(self._fns, self._consts, self._p, self._m, core, n, K, self.device, outputs,
-                                      self.cuda_options.get("kernels", "split"))
-            return core
-        self._fns = core.entry_points()
-        self._runner = CpuRunner(self._fns, self._consts, self._p, n, K, core.obs_dim, core.n_act, core.counts_arc,
-                                 core.audit)
-        if core.backend == "numba":  # the machine code loaded (or compiled) now, not inside a step or a reset
-            # the dispatcher this env's steps will run: the serial one below SERIAL_BELOW envs (or in a forked
-            # child), else the parallel one (announcing the parallel one for a small env said "compiling" in every
-            # process: it is never built there, so it never has a cache)
-            step = self._fns.step_envs
-            serial = step.serial is not None and (threads.serial_now() or n < threads.SERIAL_BELOW)
-            announce_compile("vector env step", "open plane" if core.table is None else type(core.table).__name__,
-                             self._m.kind, step.serial() if serial else step.__wrapped__)
-            self._runner.warm_up()  # (its loops' first calls hold Ctrl-C while they compile: threads.locked)
+        """The Core and the runner (backends/stepping.make_runner: the CPU or a GPU, the step compiled or loaded
+        now, not inside a step or a reset)."""
+        core, runner = stepping.make_runner(lambda backend: Core(self.scene, self.task, backend=backend),
+                                            self.num_envs, self.max_impacts_in_info,
+                                            AUTORESET_CODES[self.autoreset_mode], self.backend, self.device,
+                                            self.outputs, self.cuda_options)
+        self._core, self._runner = core, runner
+        spec = runner.spec
+        self._p, self._m, self._fns, self._consts = spec.p, spec.m, spec.fns, spec.consts
         return core
-
-    def _on_gpu(self) -> bool:
-        """backend "cuda" (numba-cuda and a GPU or its simulator, else ValueError); "auto" with a device or
-        torch outputs asked likewise, else where numba-cuda finds a real GPU."""
-        import importlib.util
-
-        from ..backends.builder import cuda_available
-        if self.backend == "cuda" or (self.backend == "auto" and (self.device is not None or self.outputs == "torch")):
-            if importlib.util.find_spec("numba_cuda") is None:
-                raise ValueError("backend='cuda' needs numba-cuda, the cuda extra: in a clone of penny_env, "
-                                 "pip install -e \".[cuda]\" (docs/gpu.md)")
-            if not cuda_available():
-                raise ValueError("backend='cuda': numba-cuda finds no CUDA GPU here (nor its simulator, NUMBA_ENABLE_CUDASIM=1)")
-            return True
-        if self.backend != "auto" or importlib.util.find_spec("numba_cuda") is None:
-            return False
-        load_numba()  # (with Ctrl-C held: backends/interrupts.py)
-        import numba
-        return not numba.config.ENABLE_CUDASIM and cuda_available()
 
     # ------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
@@ -280,8 +232,11 @@ class PennyVectorEnv(VectorEnv):
         self._in_step = True
         super().reset(seed=seed if int_seed else None)
         first = not self._started
-        host = new_state(n) if first else self._runner.state_to_host()
-        keys, episodes = host.key.copy(), host.episode.copy()
+        if first:  # (every env's key is drawn below, its episode counter starts at 0)
+            keys, episodes = np.zeros(n, dtype=np.uint64), np.zeros(n, dtype=np.int64)
+        else:
+            host = self._runner.state_to_host()
+            keys, episodes = host.key.copy(), host.episode.copy()
         if first:
             keys[:] = seed_keys(self.np_random.integers(0, 2**63, size=n))
         if seed is None:
@@ -312,11 +267,11 @@ class PennyVectorEnv(VectorEnv):
             raise ResetNeeded("PennyVectorEnv.step(): the previous step() or reset() was interrupted (an exception such "
                               "as KeyboardInterrupt inside it) and its bookkeeping may be half done; call reset()")
         runner = self._runner
-        runner.load_actions(actions)  # checked before anything changes (TypeError / ValueError naming the sub-env)
+        actions = runner.check_actions(actions)  # before anything changes (TypeError / ValueError naming the sub-env)
         # from here to the end of the runner's step the bookkeeping must run whole (class docstring)
         self._in_step = True
         try:
-            out = runner.step()
+            out = runner.step(actions)
         except Exception as exc:  # a user's law or table raising in the plain-Python step: named, reset needed
             named = self._core.named_failure(exc, "PennyVectorEnv.step")
             if named is None:

@@ -23,9 +23,9 @@ run it as it is in plain Python (backend "python", the readable reference). So a
 of the vector env on the CPU and one on a GPU run the very same operations.
 
 Nothing here imports numba. ``XP`` is the math namespace (kernels.SCALAR here; the backends substitute
-their own), ``task_reward``, ``task_target``, ``task_observation``, ``task_marked_arc`` and
-``wall_distance`` are the task's and table's functions, which the backends put into each build's
-namespace (step/tasks/, physics/scalar.py).
+their own). The task's stages, which the step calls by the names in :data:`BUILD_SUPPLIED`, are put into
+each build's namespace by the backends (step/tasks/, backends/env.py); here those names are stand-ins
+(physics/build_names.py).
 """
 from __future__ import annotations
 
@@ -37,11 +37,18 @@ import numpy as np
 from ..physics.faults import FAULT_ENERGY, FAULT_NONE, FAULT_NONFINITE, FAULT_OUTSIDE, FAULT_OUTWARD
 from ..physics.kernels import SCALAR
 from ..physics.numbers import real_array
-from ..physics.scalar import NO_ARC, Model, clear_row, run_interval
+from ..physics.scalar import NO_ARC, clear_row, run_interval
+from ..physics.build_names import build_supplied
 from .draws import draw_stream, draw_uniform
 
 XP = SCALAR      # the math namespace (numba_math or cuda_math in the compiled copies)
 prange = range   # numba.prange in the CPU copies; one thread per env on CUDA
+
+# the task's stages as the step calls them, which each build supplies (backends/env.py: the task record's reward,
+# target, observation and marked arc, and the bounds check generated from its extra_obs); stand-ins here
+BUILD_SUPPLIED = ("task_reward", "task_target", "task_observation", "task_obs_in_bounds", "task_marked_arc")
+task_reward, task_target, task_observation, task_obs_in_bounds, task_marked_arc = build_supplied(__name__,
+                                                                                                  BUILD_SUPPLIED)
 
 # info["limit"]: which documented limit ended an episode (truncated), docs/envs.md#limits. 3 to 5 and 7: the event
 # loop's run-time guard stopped the step at an impact (FAULT_OF_LIMIT, physics/faults.py); 6: a non-finite action
@@ -221,7 +228,7 @@ def initial_state(key, episode, p, m, k):
     w = p.phi_dot_lo + (p.phi_dot_hi - p.phi_dot_lo) * draw_uniform(base, 5, XP)
     s = (x, y, th, ph, W, w)
     trig = angle_trig(s)
-    tx, ty, cb, sb = task_target(k, p, m, s, trig, base, XP)  # noqa: F821 (the task's, in the build's namespace)
+    tx, ty, cb, sb = task_target(k, p, m, s, trig, base, XP)
     return PennyState(s, trig, (tx, ty), (cb, sb), 0, distance(s, (tx, ty)), 0, 0.0)
 
 
@@ -265,7 +272,7 @@ def transition(st, acc1, acc2, p, m, k, buf, row):
     ``row`` of the ImpactBuffers buf, those on the task's marked arc counted there too). Returns (state,
     elapsed, limit) (:func:`limit_of`). The motion is never altered."""
     s1, elapsed = run_interval(st.s, st.trig[2], st.trig[3], acc1, acc2, p.dt, m, p.plane, False, 0, buf, row,
-                               task_marked_arc(k, st))  # noqa: F821
+                               task_marked_arc(k, st))
     # (the guard's fault is read only where the period stopped early: off the hot path of impact-free steps)
     fault = buf.fault[row] if elapsed < p.dt else FAULT_NONE
     return s1, elapsed, limit_of(s1, elapsed, fault, p)
@@ -328,7 +335,7 @@ def write_observation(obs, i, st, p, k):
     obs[i, 7] = o[7]
     obs[i, 8] = o[8]
     obs[i, 9] = o[9]
-    task_observation(k, st, obs, i)  # noqa: F821
+    task_observation(k, st, obs, i)
 
 
 def conclude(st, s1, elapsed, limit, ctrl, n_arc, p, k, obs, i):
@@ -342,11 +349,11 @@ def conclude(st, s1, elapsed, limit, ctrl, n_arc, p, k, obs, i):
     Returns (new PennyState, reward, terminated, truncated, kinetic energy, limit)."""
     new = PennyState(s1, angle_trig(s1), st.target, st.arc, st.count + n_arc, distance(s1, st.target), st.steps + 1,
                      st.time + elapsed)
-    r, success = task_reward(k, st, new, ctrl, n_arc, XP)  # noqa: F821
+    r, success = task_reward(k, st, new, ctrl, n_arc, XP)
     write_observation(obs, i, new, p, k)
     bound = OBS_BOUND if p.plane else TARGET_OBS_BOUND
     target_seen = -bound <= obs[i, 8] <= bound and -bound <= obs[i, 9] <= bound  # (False for NaN)
-    if not (math.isfinite(r) and math.isfinite(new.dist) and target_seen and task_obs_in_bounds(obs, i)):  # noqa: F821
+    if not (math.isfinite(r) and math.isfinite(new.dist) and target_seen and task_obs_in_bounds(obs, i)):
         # the task's outputs guarded (a user's task that slipped past its registration trials): the episode ends
         r = 0.0 if not math.isfinite(r) else r
         limit = LIMIT_TASK_OUTPUT
@@ -560,5 +567,3 @@ def no_marked_arc(k, st):
     """task_marked_arc of a task without a marked arc: no impact is counted."""
     return NO_ARC
 
-
-_ = Model  # (the records the packed constants hold: EnvParams, Model, the task's constants)

@@ -52,6 +52,19 @@ def _incidence(table, p, e, sign):
     return float(n @ d), float(n @ np.array([-d[1], d[0]])), float(np.linalg.norm(g))
 
 
+class _Stepper:
+    """A probe env stepped with one action, clipped to [-1, 1]: ``step(a)`` is True where the episode ended; the
+    step's impacts are counted (``impacts``) and its info kept (``info``)."""
+
+    def __init__(self, env):
+        self.env, self.info, self.impacts = env, {}, 0
+
+    def __call__(self, a):
+        _, _, term, trunc, self.info = self.env.step(np.array([float(np.clip(a, -1, 1))]))
+        self.impacts += self.info["impacts"]
+        return term or trunc
+
+
 def _drive_rest_episode(scene, law, start, target, spin_formula=oi.post_impact_spin, s=0.001, margin=0.02):
     """T7.1's construction through the drive probe's env: (is_success, impacts, spin check error). Phase 1 rolls at
     R theta_dot = s toward the crossing of the heading line that is not head-on; phase 2 backs off to the start with the
@@ -65,19 +78,13 @@ def _drive_rest_episode(scene, law, start, target, spin_formula=oi.post_impact_s
     e = np.array([math.cos(start[3]), math.sin(start[3])])
     crossings = {sg: _incidence(table, _wall_crossing(table, np.array(start[:2]), e, sg) , e, sg) for sg in (1, -1)}
     sign = max(crossings, key=lambda sg: abs(crossings[sg][1]))  # the more oblique crossing
-    info, impacts = {}, 0
-
-    def step(a):
-        nonlocal info, impacts
-        _, _, term, trunc, info = env.step(np.array([float(np.clip(a, -1, 1))]))
-        impacts += info["impacts"]
-        return term or trunc
+    step = _Stepper(env)
     # phase 1: reach theta_dot = sign s / R in one row, then coast to the impact
     if step(sign * (s / P.R) / (A2 * DT)):
-        return False, impacts, math.nan  # (an episode that ends before the crawl is not the construction)
-    while impacts == 0:
+        return False, step.impacts, math.nan  # (an episode that ends before the crawl is not the construction)
+    while step.impacts == 0:
         if step(0.0):
-            return False, impacts, math.nan
+            return False, step.impacts, math.nan
     cb, sb, gn = crossings[sign]
     want = spin_formula(sign * s / P.R, cb, sb, sign, law, P, gn)
     spin_error = abs(u.state[5] - want) / max(abs(want), 1e-300)
@@ -91,15 +98,15 @@ def _drive_rest_episode(scene, law, start, target, spin_formula=oi.post_impact_s
             break
         ref = max(-6.0, min(6.0, 4.0 * float((z_s - z) @ np.array([math.cos(phi), math.sin(phi)])) / P.R))
         if step((ref - td) / (A2 * DT)):
-            return False, impacts, spin_error
+            return False, step.impacts, spin_error
     if step(-u.state[4] / (A2 * DT)):  # brake to theta_dot = 0 in one row
-        return False, impacts, spin_error
+        return False, step.impacts, spin_error
     clearance = -float(table.h(*u.state[:2])) / float(np.linalg.norm(table.grad(*u.state[:2])))
     if u.state[4] != 0.0 or clearance < P.R + margin * 0.5:  # (h / |grad h| under-estimates the distance: convex)
-        return False, impacts, spin_error
+        return False, step.impacts, spin_error
     # phase 3: the crawl (T3.3)
     _crawl(step, u, target, w, margin)
-    return bool(info.get("is_success", False)), impacts, spin_error
+    return bool(step.info.get("is_success", False)), step.impacts, spin_error
 
 
 def _crawl(step, u, target, w, margin):
@@ -458,20 +465,14 @@ def _spinning_episode(start, target, brake_formula=braking_distance):
     env = _env("Drive", fields, "elastic", 20000)
     env.reset(options={"state": np.array(start, float), "target": np.array(target, float)})
     u = env.unwrapped
-    info, impacts = {}, 0
-
-    def step(a):
-        nonlocal info, impacts
-        _, _, term, trunc, info = env.step(np.array([float(np.clip(a, -1, 1))]))
-        impacts += info["impacts"]
-        return term or trunc
+    step = _Stepper(env)
     while abs(u.state[4]) > 0:
         if step(-u.state[4] / (A2 * DT)):
-            return False, math.nan, impacts
+            return False, math.nan, step.impacts
     moved = float(np.hypot(*(u.state[:2] - start[:2])))
     ratio = moved / brake_formula(abs(start[4]), A2)
     _crawl(step, u, np.asarray(target, float), u.state[5], 0.02)
-    return bool(info.get("is_success", False)), ratio, impacts
+    return bool(step.info.get("is_success", False)), ratio, step.impacts
 
 
 def test_t7_3_a_spinning_penny_with_room_brakes_then_crawls():

@@ -17,7 +17,7 @@ from penny_env.physics.kernels import MEDIUM_ANGLE, SMALL_ANGLE, cis_medium, cis
 from penny_env.physics.laws import make_law
 from penny_env.physics.params import SolverSettings
 from penny_env.physics.scalar import advance_interval, flow_penny
-from conftest import random_inside_state
+from conftest import random_inside_state, random_pennies
 
 pytestmark = pytest.mark.skipif(not available(), reason="numba is not installed")
 
@@ -31,13 +31,8 @@ SET = SolverSettings()
 @given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
        steer=st.booleans(), dt=st.sampled_from([0.05, 0.5, 3.0]))
 def test_compiled_equals_python_loop_and_scalar(seed, table, law, steer, dt):
-    rng = np.random.default_rng(seed)
-    params = pe.PennyParams()
-    law = make_law(law)
     n = 6
-    S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
-    acc1 = rng.normal(0, 3, n) * steer
-    acc2 = rng.normal(0, 3, n)
+    rng, params, law, S, acc1, acc2 = random_pennies(seed, table, law, n, steer)
     ref, log, _ = advance_pennies(S, acc1, acc2, dt, params, table, law, SET, backend="python")
     trig = np.empty((4, n))
     out, clog = CompiledBatch(params, table, law, SET).states_and_impacts(S, acc1, acc2, dt, trig)

@@ -10,7 +10,7 @@ from penny_env.physics.laws import make_law
 from penny_env.backends.choice import available
 from penny_env.physics.params import SolverSettings
 from penny_env.physics.scalar import advance_interval, flow_penny
-from conftest import random_inside_state
+from conftest import random_inside_state, random_pennies
 
 TABLES = [pe.Circle(0.2), pe.Ellipse(0.15, 0.2), pe.Stadium(0.08, 0.15), pe.Ellipse(0.03, 0.011),
           pe.RoundedRectangle(0.3, 0.2, 0.05)]
@@ -22,14 +22,9 @@ BACKEND = "numba" if available() else "python"
 @given(seed=st.integers(0, 2**31 - 1), table=st.sampled_from(TABLES), law=st.sampled_from(LAWS),
        steer=st.booleans(), dt=st.sampled_from([0.05, 0.5, 3.0]))
 def test_advance_scalar_equals_batch(seed, table, law, steer, dt):
-    rng = np.random.default_rng(seed)
-    params = pe.PennyParams()
-    law = make_law(law)
-    settings = SolverSettings()
     n = 5
-    S = np.stack([random_inside_state(rng, params, table) for _ in range(n)], axis=1)
-    acc1 = rng.normal(0, 3, n) * steer
-    acc2 = rng.normal(0, 3, n)
+    rng, params, law, S, acc1, acc2 = random_pennies(seed, table, law, n, steer)
+    settings = SolverSettings()
     batch, log, elapsed = advance_pennies(S, acc1, acc2, dt, params, table, law, settings, backend=BACKEND)
     for i in range(n):
         s1, impacts, rests, el = advance_interval(tuple(S[:, i]), acc1[i], acc2[i], dt, params, table, law, settings)

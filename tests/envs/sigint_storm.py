@@ -58,6 +58,24 @@ def interruptible(f):
         n += 1
 
 
+def storm_steps(step, reset, after, n_int, refused):
+    """``steps`` calls step(j) under the storm: an interrupted one counted, a ResetNeeded refusal counted and the env
+    reset (through the storm), any other exception recorded in ``errors``; after(j, out) checks a whole step's
+    outputs and returns the interrupts its own calls caught. Returns (interrupts, refusals), added to those given."""
+    for j in range(steps):
+        try:
+            ok, out = attempt(lambda: step(j))
+        except ResetNeeded:
+            refused += 1
+            n_int += interruptible(reset)[1]
+            continue
+        except Exception as ex:  # noqa: BLE001
+            errors.append(f"{type(ex).__name__}: {str(ex)[:100]}")
+            continue
+        n_int += 1 if not ok else after(j, out)
+    return n_int, refused
+
+
 import gymnasium as gym  # noqa: E402
 from gymnasium.error import ResetNeeded  # noqa: E402
 
@@ -76,20 +94,11 @@ if what == "vector":
     v, k = interruptible(lambda: gym.make_vec("PennyReach-Ellipse-v0", num_envs=N, max_episode_steps=20))
     n_int += k
     n_int += interruptible(lambda: v.reset(seed=0))[1]
-    for j in range(steps):
-        try:
-            ok, out = attempt(lambda: v.step(A[j]))
-        except ResetNeeded:
-            refused += 1
-            n_int += interruptible(v.reset)[1]
-            continue
-        except Exception as e:  # noqa: BLE001
-            errors.append(f"{type(e).__name__}: {str(e)[:100]}")
-            continue
-        if not ok:
-            n_int += 1
-        elif not (np.isfinite(out[0]).all() and np.isfinite(out[1]).all()):
+    def check(j, out):
+        if not (np.isfinite(out[0]).all() and np.isfinite(out[1]).all()):
             errors.append(f"non-finite at {j}")
+        return 0
+    n_int, refused = storm_steps(lambda j: v.step(A[j]), v.reset, check, n_int, refused)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     stop = True
     v.reset(seed=5)
@@ -101,20 +110,8 @@ elif what == "single":
     e, k = interruptible(lambda: gym.make("PennyPark-Stadium-v0"))
     n_int += k
     n_int += interruptible(lambda: e.reset(seed=0))[1]
-    for j in range(steps):
-        try:
-            ok, out = attempt(lambda: e.step(A[j, 0]))
-        except ResetNeeded:
-            refused += 1
-            n_int += interruptible(e.reset)[1]
-            continue
-        except Exception as ex:  # noqa: BLE001
-            errors.append(f"{type(ex).__name__}: {str(ex)[:100]}")
-            continue
-        if not ok:
-            n_int += 1
-        elif out[2] or out[3]:
-            n_int += interruptible(e.reset)[1]
+    n_int, refused = storm_steps(lambda j: e.step(A[j, 0]), e.reset,
+                                 lambda j, out: interruptible(e.reset)[1] if out[2] or out[3] else 0, n_int, refused)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     stop = True
     e.reset(seed=5)

@@ -109,12 +109,13 @@ def test_a_held_ctrl_c_is_raised_inside_a_block_stuck_past_the_hold_limit(monkey
 
     from penny_env.backends import interrupts
     monkeypatch.setattr(interrupts, "HOLD_LIMIT_S", 0.3, raising=False)
-    start = time.monotonic()
+    stuck_to_the_end = []  # the busy block ran its 20 s out: the Ctrl-C came only after it
     with pytest.raises(KeyboardInterrupt):
         with interrupts.compiling(collect=False):
             os.kill(os.getpid(), signal.SIGINT)
-            _busy_until(start + 20.0)
-    assert time.monotonic() - start < 10.0  # (raised about 0.3 s after the Ctrl-C, inside the block)
+            _busy_until(time.monotonic() + 20.0)
+            stuck_to_the_end.append(True)
+    assert not stuck_to_the_end  # (raised about 0.3 s after the Ctrl-C, inside the block)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     # a block that ends in time raises the held Ctrl-C once, after it, and nothing comes later
     with pytest.raises(KeyboardInterrupt):
@@ -123,13 +124,13 @@ def test_a_held_ctrl_c_is_raised_inside_a_block_stuck_past_the_hold_limit(monkey
             sum(range(10000))
     _busy_until(time.monotonic() + 1.0)
     # nested blocks: the outer one holds, and its limit counts (a stuck inner block does not hold it again)
-    start = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
         with interrupts.compiling(collect=False):
             with interrupts.compiling(collect=False):
                 os.kill(os.getpid(), signal.SIGINT)
-                _busy_until(start + 20.0)
-    assert time.monotonic() - start < 10.0
+                _busy_until(time.monotonic() + 20.0)
+                stuck_to_the_end.append(True)
+    assert not stuck_to_the_end
 
 
 UNDER_A_SMALL_ADDRESS_SPACE_LIMIT = """

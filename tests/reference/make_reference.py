@@ -935,6 +935,15 @@ def compare_runs(r1, r2):
     return dt, ds, same_ends
 
 
+def record_crosscheck(dg, key, res, other, name=None):
+    """Two runs of one scene agree (the same impacts, times within 1e-32): their largest differences go into the
+    diagnostics dg under key."""
+    dt, ds, same = compare_runs(res, other)
+    assert same and dt < mpf("1e-32"), dt if name is None else (name, dt)
+    dg[f"{key}_max_abs_diff_times"] = fnum(dt)
+    dg[f"{key}_max_abs_diff_states"] = fnum(ds)
+
+
 def f64(x):
     return mpf(float(mpf(x)))
 
@@ -970,20 +979,14 @@ def build_A(do_checks, log):
         if do_checks:
             # (1) independent sampler
             r2 = run_uncontrolled(st0, table, P, law, None, 25, mpf(5), method="sample", checks={})
-            dt, ds, same = compare_runs(res, r2)
-            assert same and dt < mpf("1e-32"), (name, dt)
-            dg["crosscheck_sampler_max_abs_diff_times"] = fnum(dt)
-            dg["crosscheck_sampler_max_abs_diff_states"] = fnum(ds)
+            record_crosscheck(dg, "crosscheck_sampler", res, r2, name)
             # (2) 70 digits
             with mp.workdps(70):
                 P70 = default_params()
                 st70 = (mpf(0), mpf(0), mpf(0), mpmath.pi / 2, mpf(10), mpf("0.2"))
                 r3 = run_uncontrolled(st70, Ellipse(mpf(a), mpf(b)), P70, law, None, 25, mpf(5),
                                       checks={"inside_check": False})
-            dt, ds, same = compare_runs(res, r3)
-            assert same and dt < mpf("1e-32"), (name, dt)
-            dg["precision_check_vs_70_digits_max_abs_diff_times"] = fnum(dt)
-            dg["precision_check_vs_70_digits_max_abs_diff_states"] = fnum(ds)
+            record_crosscheck(dg, "precision_check_vs_70_digits", res, r3, name)
             # (3) float64-rounded inputs
             P64 = default_params(exact=False)
             st64 = tuple(f64(v) for v in st0)
@@ -1025,17 +1028,11 @@ def build_B(do_checks, log):
     dg = scene_diag(res, P, "elastic")
     if do_checks:
         r2 = run_uncontrolled(st0, table, P, "elastic", None, 20, mpf(3), method="sample", checks={})
-        dt, ds, same = compare_runs(res, r2)
-        assert same and dt < mpf("1e-32"), dt
-        dg["crosscheck_sampler_max_abs_diff_times"] = fnum(dt)
-        dg["crosscheck_sampler_max_abs_diff_states"] = fnum(ds)
+        record_crosscheck(dg, "crosscheck_sampler", res, r2)
         with mp.workdps(70):
             r3 = run_uncontrolled(st0, Stadium(mpf("0.1"), mpf("0.2")), default_params(), "elastic", None, 20,
                                   mpf(3), checks={"inside_check": False})
-        dt, ds, same = compare_runs(res, r3)
-        assert same and dt < mpf("1e-32"), dt
-        dg["precision_check_vs_70_digits_max_abs_diff_times"] = fnum(dt)
-        dg["precision_check_vs_70_digits_max_abs_diff_states"] = fnum(ds)
+        record_crosscheck(dg, "precision_check_vs_70_digits", res, r3)
     # which piece of the wall was hit
     hits = []
     for s, sg in zip(res["states"], res["ends"]):
@@ -1057,17 +1054,11 @@ def build_B(do_checks, log):
     dg = scene_diag(res, P, "restitution")
     if do_checks:
         r2 = run_uncontrolled(st0, table, P, "restitution", e, 15, mpf(3), method="sample", checks={})
-        dt, ds, same = compare_runs(res, r2)
-        assert same and dt < mpf("1e-32"), dt
-        dg["crosscheck_sampler_max_abs_diff_times"] = fnum(dt)
-        dg["crosscheck_sampler_max_abs_diff_states"] = fnum(ds)
+        record_crosscheck(dg, "crosscheck_sampler", res, r2)
         with mp.workdps(70):
             r3 = run_uncontrolled(st0, Ellipse(mpf("0.2"), mpf("0.12")), default_params(), "restitution",
                                   mpf("0.6"), 15, mpf(3), checks={"inside_check": False})
-        dt, ds, same = compare_runs(res, r3)
-        assert same and dt < mpf("1e-32"), dt
-        dg["precision_check_vs_70_digits_max_abs_diff_times"] = fnum(dt)
-        dg["precision_check_vs_70_digits_max_abs_diff_states"] = fnum(ds)
+        record_crosscheck(dg, "precision_check_vs_70_digits", res, r3)
     d["energy_after_each_impact"] = SL([energy(s, P) for s in res["states"]])
     d["diagnostics"] = dg
     out.append(d)
@@ -1116,10 +1107,7 @@ def build_B(do_checks, log):
             st60 = (mpf(0), mpf(0), mpf(0), mpf("0.4"), mpf(mpmath.nstr(thd0, 10)), mpf("0.5"))
             r3 = run_controlled(st60, Ellipse(mpf("0.2"), mpf("0.15")), default_params(), "elastic", None, ctr,
                                 mpf("0.1"), mpf(2), checks={}, step_scale=mpf("0.5"))
-        dt, ds, same = compare_runs(res, r3)
-        assert same and dt < mpf("1e-32"), dt
-        dg["crosscheck_60_digits_half_step_max_abs_diff_times"] = fnum(dt)
-        dg["crosscheck_60_digits_half_step_max_abs_diff_states"] = fnum(ds)
+        record_crosscheck(dg, "crosscheck_60_digits_half_step", res, r3)
         # how much does the path curve? heading range
     d["heading_change_0_to_2"] = S(res["state_final"][3] - st0[3])
     d["diagnostics"] = dg
@@ -1158,17 +1146,11 @@ def build_E(do_checks, log):
         dg = scene_diag(res, P, law)
         if do_checks:
             r2 = run_uncontrolled(st0, table, P, law, e, n_imp, mpf(3), method="sample", checks={})
-            dt, ds, same = compare_runs(res, r2)
-            assert same and dt < mpf("1e-32"), dt
-            dg["crosscheck_sampler_max_abs_diff_times"] = fnum(dt)
-            dg["crosscheck_sampler_max_abs_diff_states"] = fnum(ds)
+            record_crosscheck(dg, "crosscheck_sampler", res, r2)
             with mp.workdps(70):
                 r3 = run_uncontrolled(st0, _rounded_rectangle(), default_params(), law, e, n_imp, mpf(3),
                                       checks={"inside_check": False})
-            dt, ds, same = compare_runs(res, r3)
-            assert same and dt < mpf("1e-32"), dt
-            dg["precision_check_vs_70_digits_max_abs_diff_times"] = fnum(dt)
-            dg["precision_check_vs_70_digits_max_abs_diff_states"] = fnum(ds)
+            record_crosscheck(dg, "precision_check_vs_70_digits", res, r3)
         d["impact_wall_pieces"] = [table.piece_name(*end_pos(s, sg, P)) for s, sg in zip(res["states"], res["ends"])]
         d["diagnostics"] = dg
         out.append(d)

@@ -55,3 +55,55 @@ def test_the_layout_in_architecture_md_is_the_contract_s():
     readme = (ROOT / "README.md").read_text()
     assert "[docs/architecture.md](docs/architecture.md)" in readme.split("## Layout", 1)[1]
     assert "| folder |" not in readme  # no second copy of the layout
+
+
+def private_names_imported(path: Path) -> list:
+    """(line, what) of every private name (a module or a name starting with "_", dunders aside) that the module at
+    ``path`` imports from penny_env, or reads as an attribute of a penny_env module it imported."""
+    import ast
+
+    def private(name):
+        return any(part.startswith("_") and not part.startswith("__") for part in name.split("."))
+    tree = ast.parse(path.read_text())
+    found, modules = [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "penny_env":
+            for alias in node.names:
+                if private(f"{node.module}.{alias.name}"):
+                    found.append((node.lineno, f"{node.module}.{alias.name}"))
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "penny_env":
+                    modules.add(alias.asname or alias.name.split(".")[0])
+                    if private(alias.name):
+                        found.append((node.lineno, alias.name))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and private(node.attr):
+            chain, base = [node.attr], node.value
+            while isinstance(base, ast.Attribute):
+                chain.append(base.attr)
+                base = base.value
+            if isinstance(base, ast.Name) and base.id in modules:
+                found.append((node.lineno, ".".join([base.id] + chain[::-1])))
+    return found
+
+
+def lab_packages() -> list:
+    """The lab: every root package of the import contract but penny_env (adding one there makes it lab)."""
+    import tomllib
+    roots = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["root_packages"]
+    return [r for r in roots if r != "penny_env"]
+
+
+@pytest.mark.fast
+def test_the_lab_imports_no_private_name_of_the_package(tmp_path):
+    """The lab uses penny_env's public modules and names only: a private one it needs gets a public home (the import
+    contract checks private modules; names are this test's)."""
+    assert {"training", "studies", "devtools"} <= set(lab_packages())
+    found = [f"{p.relative_to(ROOT)}:{line}: {what}" for package in lab_packages()
+             for p in sorted((ROOT / package).rglob("*.py")) for line, what in private_names_imported(p)]
+    assert found == []
+    probe = tmp_path / "probe.py"
+    probe.write_text("import penny_env.envs.scene as sc\nfrom penny_env.envs.scene import (resolve,\n    _merge)\n"
+                     "import penny_env\nx = penny_env.envs._private\n")
+    assert [w for _, w in private_names_imported(probe)] == ["penny_env.envs.scene._merge", "penny_env.envs._private"]

@@ -40,15 +40,30 @@ def workdir():
     shutil.rmtree(path, ignore_errors=True)
 
 
-@pytest.fixture(scope="module")
-def wheel(workdir):
-    """The wheel built from a copy of this checkout (pip wheel, no build isolation: no network)."""
-    src = copy_package(workdir / "src")
-    out = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                          str(workdir / "dist"), str(src)], capture_output=True, text=True, timeout=300)
-    if out.returncode != 0:
-        pytest.skip(f"cannot build a wheel here: {out.stderr[-500:]}")
-    return next((workdir / "dist").glob("penny_env-*.whl"))
+@pytest.fixture(scope="session")
+def wheel(tmp_path_factory):
+    """The wheel built from a copy of this checkout (pip wheel, no build isolation: no network), once per test run:
+    the first test worker to need it builds it in the run's shared temporary folder, under a lock, and the others
+    take that one."""
+    import fcntl
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # (the workers' common folder)
+    dist = shared / "penny_env_wheel"
+    with open(shared / "penny_env_wheel.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        built = sorted(dist.glob("penny_env-*.whl"))
+        if not built:
+            work = Path(tempfile.mkdtemp(prefix="penny_wheel_src_"))
+            try:
+                out = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                                      "-w", str(dist), str(copy_package(work / "src"))], capture_output=True, text=True,
+                                     timeout=300)
+            finally:
+                shutil.rmtree(work, ignore_errors=True)
+            if out.returncode != 0:
+                pytest.skip(f"cannot build a wheel here: {out.stderr[-500:]}")
+            built = sorted(dist.glob("penny_env-*.whl"))
+    return built[0]
 
 
 def test_the_wheel_ships_penny_env_with_its_data_and_no_top_level_training(wheel):
@@ -85,21 +100,23 @@ def _read_only(path: Path):
         p.chmod(0o555 if p.is_dir() else 0o444)
 
 
+# the open plane: the cheapest shape to compile (no wall, no event loop), every entry point of a table (the single
+# env, the vector env, the batch loops) all the same
 USE = """
     import sys
     import numpy as np
     import gymnasium as gym
     import penny_env, penny_env.batch as pb
     assert penny_env.__file__.startswith(sys.argv[1]), penny_env.__file__  # the installed copy
-    env = gym.make("PennyReach-Ellipse-v0")
+    env = gym.make("PennyReach-Plane-v0")
     env.reset(seed=0)
     env.step(env.action_space.sample())
-    venv = gym.make_vec("PennyReach-Ellipse-v0", num_envs=8)
+    venv = gym.make_vec("PennyReach-Plane-v0", num_envs=8)
     venv.reset(seed=0)
     venv.step(venv.action_space.sample())
     S = np.zeros((8, 6)); S[:, 4] = 8.0; S[:, 3] = np.linspace(0, 6, 8)
-    res = pb.simulate(S, table={"kind": "ellipse", "a": 0.3, "b": 0.2}, law="elastic", t_final=5.0)
-    assert np.isfinite(res.final_states).all() and res.impact_counts.sum() > 0
+    res = pb.simulate(S, table=None, t_final=5.0)
+    assert np.isfinite(res.final_states).all() and np.abs(res.final_states[:, :2]).max() > 0.1  # (rolled off)
     print("ok")
 """
 
@@ -123,10 +140,10 @@ def test_a_read_only_install_run_by_another_user_compiles_caches_and_loads(wheel
     first = run_unprivileged(USE, site, home, home)
     assert first.returncode == 0 and "ok" in first.stdout, first.stderr[-3000:]
     # the first use compiled, said so once per entry point, and cached in numba's user-wide cache directory
-    assert first.stderr.count("penny_env: compiling the single env step for table Ellipse") == 1, first.stderr
-    assert "compiling the vector env step for table Ellipse" in first.stderr
+    assert first.stderr.count("penny_env: compiling the single env step for table open plane") == 1, first.stderr
+    assert "compiling the vector env step for table open plane" in first.stderr
     cached = list((home / ".cache" / "numba").rglob("*.nbi"))
-    assert any("ellipse" in p.name for p in cached), cached
+    assert any("plane" in p.name for p in cached), cached
     assert not any(site.rglob("*.nbi"))  # nothing written into the install
     second = run_unprivileged(USE, site, home, home)  # loads the cache: no compile notice
     assert second.returncode == 0 and "ok" in second.stdout, second.stderr[-3000:]

@@ -104,15 +104,8 @@ def test_a_task_is_checked_when_it_is_registered():
     assert "t1" not in TASKS
 
 
-class _BigK(NamedTuple):
-    length_scale: float
-    tolerance: float
-    progress_weight: float
-    ctrl_cost: float
-    success_bonus: float
-    target_scale: float
-    heading_offset: float
-    budget: int
+# reach's constants and an int
+_BigK = NamedTuple("_BigK", [*reach.ReachConstants.__annotations__.items(), ("budget", int)])
 
 
 def _big_constants(scene, task, L):

@@ -31,21 +31,14 @@ def test_train_quick(reports_untouched, config):
 
 def test_config_errors_name_the_field(tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("env_id: PennyReach-Ellipse-v0\nalgo: ppo\nlearning_rat: 0.1\n")
-    with pytest.raises(ValueError, match="learning_rat"):
-        train.load_config(bad)
-    bad.write_text("env_id: NoSuchEnv-v0\nalgo: ppo\n")
-    with pytest.raises(ValueError, match="env_id"):
-        train.load_config(bad)
-    bad.write_text("env_id: PennyReach-Ellipse-v0\nalgo: dqn\n")
-    with pytest.raises(ValueError, match="algo"):
-        train.load_config(bad)
-    bad.write_text("env_id: PennyReach-Ellipse-v0\nalgo: ppo\nnum_envs: 0\n")
-    with pytest.raises(ValueError, match="num_envs"):
-        train.load_config(bad)
-    bad.write_text("env_id: [unclosed\n")
-    with pytest.raises(ValueError, match="invalid YAML"):
-        train.load_config(bad)
+    for text, named in (("env_id: PennyReach-Ellipse-v0\nalgo: ppo\nlearning_rat: 0.1\n", "learning_rat"),
+                        ("env_id: NoSuchEnv-v0\nalgo: ppo\n", "env_id"),
+                        ("env_id: PennyReach-Ellipse-v0\nalgo: dqn\n", "algo"),
+                        ("env_id: PennyReach-Ellipse-v0\nalgo: ppo\nnum_envs: 0\n", "num_envs"),
+                        ("env_id: [unclosed\n", "invalid YAML")):
+        bad.write_text(text)
+        with pytest.raises(ValueError, match=named):
+            train.load_config(bad)
 
 
 @needs_sb3
