@@ -515,12 +515,53 @@ FALL_TEXT = ("Recipes of PPO with the heading head on the same cells and seeds (
              "above 0.15 rad; ppo_heading, the ladder's: the learning rate adapted to the measured KL (RSL-RL's rule, "
              "desired KL 0.01), the noise above 0.15 rad, LayerNorm, Adam with beta1 = beta2. Per seed: the "
              "validation peak, the lowest and the final validation after it, and the learning rate, noise std and "
-             "gradient norm at the peak and at the end.")
+             "gradient norm at the peak and at the end. Rows marked 'kept run' are single runs kept in docs/ladder_fall/ "
+             "(runs.csv: their commit, date and command), shown until the ladder's own jobs of the same recipes "
+             "have run.")
+
+
+FALL_ARCHIVE = DOCS / "ladder_fall" / "runs.csv"
+
+
+FALL_READING = (
+    "**What caused the fall, and what holds it** (the rows and the figure below; one seed per recipe so far). In the "
+    "first recipe's run the validation success peaked and then fell to 0 while the approximate KL stayed small and "
+    "the explained variance high: neither the trust region nor the critic broke first. What moved first was the "
+    "noise: the heading noise std shrank through learning toward its floor of 0.05 rad, and the gradient norm, "
+    "which grows like 1/std for a Gaussian policy's log-likelihood, rose past the clip at 0.5 before the peak and "
+    "kept rising after it, while the annealed learning rate shrank: the updates followed the noisiest part of the "
+    "gradient with ever less exploration, and the training success fell with the validation's (shrinking "
+    "exploration, as PPO-CMA describes). The ladder's recipe keeps the noise above 0.15 rad (its gradient norm "
+    "stops growing once the noise is at the floor) and adapts the learning rate to the measured KL instead of "
+    "annealing it; it adds LayerNorm and Adam with beta1 = beta2. On the same seed it rose without a fall to the end of its run. The noise floor "
+    "alone (ppo_heading_floor) and more seeds of each recipe are the config's jobs that separate the parts of the "
+    "cure; until they have run this reading rests on one seed per recipe.")
 
 
 def progress_of(runs, job) -> dict | None:
     """The job's per-update diagnostics (the agent's progress.csv) as {column: array}, or None."""
-    path = job_dir(runs, job) / "progress.csv"
+    return read_progress(job_dir(runs, job) / "progress.csv")
+
+
+def archived_fall_runs(cell, path=None) -> dict:
+    """{label: [(seed, diagnostics)]} of runs kept in docs/ladder_fall/ (their progress.csv, commit, date and command
+    in runs.csv) on ``cell``: the recipes' curves before the ladder's own jobs of them have run."""
+    out, path = {}, Path(path or FALL_ARCHIVE)
+    if not path.is_file():
+        return out
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            if r["cell"] != cell_name(cell):
+                continue
+            p = read_progress(path.parent / r["file"])
+            if p is None:
+                raise ValueError(f"{path}: {r['file']} has no rows")
+            out.setdefault(f"{r['recipe']} (kept run, {r['commit']})", []).append((int(r["seed"]), p))
+    return out
+
+
+def read_progress(path: Path) -> dict | None:
+    """A progress.csv as {column: array}, or None where there is none."""
     if not path.is_file():
         return None
     with open(path) as f:
@@ -545,7 +586,7 @@ def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
         return []
     lines = []
     for cell in cfg["cells"]:
-        runs_of = {}
+        runs_of = archived_fall_runs(cell)
         for agent in fall:
             for job in jobs:
                 if job["agent"] == agent and tuple(job["cell"]) == cell and result_of(runs, job, job_dir):
@@ -690,7 +731,7 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
         lines.append("")
     fall = fall_section(cfg, jobs, runs, results, out)
     if fall:
-        lines += ["## What made PPO fall, and what holds it", "", FALL_TEXT, "", *fall]
+        lines += ["## What made PPO fall, and what holds it", "", FALL_TEXT, "", FALL_READING, "", *fall]
     lines += ["CSV: one row per (agent, privileged, probe, table, law, seed, env_steps): "
               f"[{out.with_suffix('.csv').name}]({out.with_suffix('.csv').name}).", ""]
     out.write_text("\n".join(lines))

@@ -128,6 +128,27 @@ def test_the_fall_section_puts_the_recipes_diagnostics_side_by_side(tmp_path):
     assert "| b | 0 | 0.60 (3e+03) | 0.60, 0.60 | +0.00 |" in text
 
 
+def test_the_fall_section_shows_the_kept_runs_with_their_commit(tmp_path, monkeypatch):
+    cell = ("Steer", "stadium", "elastic")
+    kept = ladder.archived_fall_runs(cell)  # docs/ladder_fall/runs.csv, committed
+    assert len(kept) >= 2 and all("kept run" in label for label in kept)
+    for runs in kept.values():
+        for seed, p in runs:
+            assert {"val_success", "std", "grad_norm", "lr"} <= set(p) and np.isfinite(p["val_success"]).any()
+    assert ladder.archived_fall_runs(("Steer", "circle", "elastic")) == {}
+    folder = tmp_path / "fall"
+    folder.mkdir()
+    (folder / "runs.csv").write_text("recipe,cell,seed,commit,date,env_steps,file,command\n"
+                                     "r,Steer-stadium-elastic,0,abc,2026-01-01,1,missing.csv,x\n")
+    with pytest.raises(ValueError, match="missing.csv has no rows"):
+        ladder.archived_fall_runs(cell, folder / "runs.csv")
+    # the section needs no job of the ladder's own while two kept recipes are there
+    monkeypatch.setattr(ladder, "FALL_ARCHIVE", ladder.DOCS / "ladder_fall" / "runs.csv")
+    cfg = {"eval_seeds": 4, "cells": [cell], "fall": ["a", "b"], "agents": {"a": {}, "b": {}}}
+    text = "\n".join(ladder.fall_section(cfg, [], tmp_path, {}, tmp_path / "r.md"))
+    assert text.count("kept run") >= 3  # the heading and one row per kept run
+
+
 def test_the_witnessed_rate_comes_from_the_witness_studys_pairs():
     w = ladder.witnessed_by_seed(("Steer", "ellipse", "elastic"), 200)
     with open(ROOT / "docs" / "witnesses.csv") as f:
