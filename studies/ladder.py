@@ -533,7 +533,8 @@ FALL_READING = (
     "gradient with ever less exploration, and the training success fell with the validation's (shrinking "
     "exploration, as PPO-CMA describes). The ladder's recipe keeps the noise above 0.15 rad (its gradient norm "
     "stops growing once the noise is at the floor) and adapts the learning rate to the measured KL instead of "
-    "annealing it; it adds LayerNorm and Adam with beta1 = beta2. On the same seed it rose without a fall to the end of its run. The noise floor "
+    "annealing it; it adds LayerNorm and Adam with beta1 = beta2. On the same seed it rose without a fall to the "
+    "end of its run. The noise floor "
     "alone (ppo_heading_floor) and more seeds of each recipe are the config's jobs that separate the parts of the "
     "cure; until they have run this reading rests on one seed per recipe.")
 
