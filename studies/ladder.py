@@ -457,7 +457,8 @@ def goals(cfg, summary) -> list[str]:
         lines.append(f"- {cell_name(cell)}, witness-guided (PRIVILEGED) on every seed at {GUIDED_GOAL}: **{v}** "
                      f"({words})")
     plane = [s for s in summary if s["cell"][1] == "plane"]
-    lines.append(f"- every agent stays at 0 on the plane: **{'met' if all(s['success'] == 0 for s in plane) else 'NOT met'}**"
+    plane_verdict = "not run" if not plane else "met" if all(s["success"] == 0 for s in plane) else "NOT met"
+    lines.append(f"- every agent stays at 0 on the plane: **{plane_verdict}**"
                  f" ({len(plane)} (agent, cell) rows, {sum(s['seeds'] for s in plane)} seeds)")
     kept = [(s, f, k) for s in summary for f, k in zip(s["final"], s["per_seed"]) if not math.isnan(f)]
     if kept:
@@ -475,6 +476,9 @@ def answer_sentences(cfg, summary) -> list[str]:
     for probe, words in (("Steer", "steer only, park"), ("Drive", "drive only, reach"), ("Both", "both controls, park")):
         rows = [s for s in summary if s["cell"][0] == probe and s["cell"][1] != "plane" and not math.isnan(s["share"])]
         if not rows:
+            if any(c[0] == probe and c[1] != "plane" for c in cfg["cells"]):
+                out.append(f"**{words}**: no job of this actuation has finished yet; the ladder's jobs wait "
+                           "([docs/ladder.md](docs/ladder.md)).")
             continue
 
         def best_per_cell(privileged):

@@ -106,6 +106,16 @@ def test_a_goal_is_met_only_where_every_seed_and_the_interval_clear_it():
     assert any("Steer-stadium-elastic, witness-guided" in g and "**not run**" in g for g in lines)
 
 
+def test_nothing_finished_is_said_and_never_met():
+    cells = [("Steer", "stadium", "elastic"), ("Steer", "plane", "-")]
+    cfg = {"eval_seeds": 200, "cells": cells, "agents": {"a": {"privileged": False}}}
+    lines = ladder.goals(cfg, [])
+    assert any("on the plane: **not run**" in g for g in lines)  # no row is not a met goal
+    assert not any("**met**" in g for g in lines)
+    answer = ladder.answer_sentences(cfg, [])
+    assert len(answer) == 1 and "steer only, park" in answer[0] and "no job of this actuation has finished" in answer[0]
+
+
 def test_the_fall_section_puts_the_recipes_diagnostics_side_by_side(tmp_path):
     cell = ("Steer", "stadium", "elastic")
     cfg = {"eval_seeds": 4, "cells": [cell], "fall": ["a", "b"],
