@@ -528,7 +528,7 @@ FALL_ARCHIVE = DOCS / "ladder_fall" / "runs.csv"
 
 
 FALL_READING = (
-    "**What caused the fall, and what holds it** (the rows and the figure below; one seed per recipe so far). In the "
+    "**What caused the fall, and what holds it** (the rows and the figure below; one seed of the first recipe so far). In the "
     "first recipe's run the validation success peaked and then fell to 0 while the approximate KL stayed small and "
     "the explained variance high: neither the trust region nor the critic broke first. What moved first was the "
     "noise: the heading noise std shrank through learning toward its floor of 0.05 rad, and the gradient norm, "
@@ -540,7 +540,9 @@ FALL_READING = (
     "annealing it; it adds LayerNorm and Adam with beta1 = beta2. On the same seed it rose without a fall to the "
     "end of its run. The noise floor "
     "alone (ppo_heading_floor) and more seeds of each recipe are the config's jobs that separate the parts of the "
-    "cure; until they have run this reading rests on one seed per recipe.")
+    "cure; until they have run this reading rests on one seed of the first recipe. The ladder's recipe removes the "
+    "fall, not the spread between seeds: a seed that starts late is still low at its budget (the per-seed rates "
+    "above).")
 
 
 def progress_of(runs, job) -> dict | None:
@@ -684,13 +686,16 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
         w.writerows(rows)
     figures = write_figures(cfg, results, out)
     done = sum(len(res) for res in results.values())
-    cpu = sum(r.get("cpu_seconds", 0.0) for res in results.values() for r in res)
+    # a job's training time over all its resumed parts (the agent's own count; one core per job), else this part's CPU
+    cpu = sum((r.get("train") or {}).get("wall_time_s") or r.get("cpu_seconds", 0.0)
+              for res in results.values() for r in res)
     lines = header("The agent study: do baseline agents learn to use impacts? Learning agents on the single-input "
                    "cells beside the certified witnesses",
                    "studies.ladder", list(argv))
-    lines += [f"- jobs: {done} of {len(jobs)} finished ({cpu / 3600:.1f} CPU hours in the finished jobs; this "
-              f"invocation {seconds:.0f} s); seeds per (agent, cell): {_seeds_words(cfg)} (the seeds column counts "
-              f"those finished)" + (f"; {len(stale)} result(s) in {runs} made by other job configs not counted "
+    lines += [f"- jobs: {done} of {len(jobs)} finished ({cpu / 3600:.1f} hours of training in the finished jobs, "
+              f"one core each; this invocation {seconds:.0f} s); seeds per (agent, cell): {_seeds_words(cfg)} (the "
+              f"seeds column counts those finished)"
+              + (f"; {len(stale)} result(s) in {runs} made by other job configs not counted "
                                      f"(they rerun)" if stale else "") + "; evaluation: one deterministic "
               f"episode per pair seed 0..{cfg['eval_seeds'] - 1} (training/protocol.evaluate), the witness study's",
               "- privileged agents (PRIVILEGED below) are guided in training by certified witness episodes of training "
@@ -741,7 +746,9 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
               f"[{out.with_suffix('.csv').name}]({out.with_suffix('.csv').name}).", ""]
     out.write_text("\n".join(lines))
     if not quick:
-        write_readme(answer_sentences(cfg, summary))
+        status = (f"So far {done} of the grid's {len(jobs)} jobs have finished ({cpu / 3600:.1f} core-hours of training); the "
+                  "rest wait, resumable job by job, and each answer below holds for the jobs finished.")
+        write_readme([status, *answer_sentences(cfg, summary)])
     return out
 
 
