@@ -100,7 +100,8 @@ def report(runs: dict, env_id: str, threads: int, rep) -> str:
     import numba
     lines = rep.header("PPO throughput: the ladder's PPO and SB3's PPO, side by side")
     lines += [f"- env: `{env_id}` with the fair reward (success bonus only); torch threads: {threads}; numba "
-              f"threads: {numba.config.NUMBA_NUM_THREADS}; learners alternate round after round in one process", ""]
+              f"threads: {numba.config.NUMBA_NUM_THREADS}; learners alternate round after round (the ladder PPO by "
+              "its command line in a process of its own, SB3's in this one)", ""]
     for name, rs in runs.items():
         lines.append(f"- {name}: {rs[0]['config']}")
     lines += ["", "| round | learner | env steps | wall s | env-steps/s | env.step s | update s |",
