@@ -520,8 +520,8 @@ FALL_TEXT = ("Recipes of PPO with the heading head on the same cells and seeds (
              "desired KL 0.01), the noise above 0.15 rad, LayerNorm, Adam with beta1 = beta2. Per seed: the "
              "validation peak, the lowest and the final validation after it, and the learning rate, noise std and "
              "gradient norm at the peak and at the end. Rows marked 'kept run' are single runs kept in docs/ladder_fall/ "
-             "(runs.csv: their commit, date and command), shown until the ladder's own jobs of the same recipes "
-             "have run.")
+             "(runs.csv: their commit, date and command), shown beside the ladder's own jobs of the same "
+             "recipes.")
 
 
 FALL_ARCHIVE = DOCS / "ladder_fall" / "runs.csv"
@@ -538,11 +538,10 @@ FALL_READING = (
     "exploration, as PPO-CMA describes). The ladder's recipe keeps the noise above 0.15 rad (its gradient norm "
     "stops growing once the noise is at the floor) and adapts the learning rate to the measured KL instead of "
     "annealing it; it adds LayerNorm and Adam with beta1 = beta2. On the same seed it rose without a fall to the "
-    "end of its run. The noise floor "
-    "alone (ppo_heading_floor) and more seeds of each recipe are the config's jobs that separate the parts of the "
-    "cure; until they have run this reading rests on one seed of the first recipe. The ladder's recipe removes the "
-    "fall, not the spread between seeds: a seed that starts late is still low at its budget (the per-seed rates "
-    "above).")
+    "end of its run. The noise floor alone (ppo_heading_floor) and more seeds of each recipe are the config's jobs "
+    "that separate the parts of the cure; until they have run this reading rests on one seed of the first recipe. "
+    "The ladder's recipe removes the fall, not the spread between seeds: a seed that starts late is still low at "
+    "its budget (the per-seed rates above).")
 
 
 def progress_of(runs, job) -> dict | None:
