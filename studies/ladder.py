@@ -470,15 +470,17 @@ def goals(cfg, summary) -> list[str]:
     return lines
 
 
-def answer_sentences(cfg, summary) -> list[str]:
-    """The answer to "do baseline agents learn to use impacts?", one sentence per actuation, from the table."""
+def answer_sentences(cfg, summary, link: str = " ([docs/ladder.md](docs/ladder.md))") -> list[str]:
+    """The answer to "do baseline agents learn to use impacts?", one sentence per actuation, from the table.
+
+    `link` ends each sentence: the README's block points at the report; the report itself passes "".
+    """
     out = []
     for probe, words in (("Steer", "steer only, park"), ("Drive", "drive only, reach"), ("Both", "both controls, park")):
         rows = [s for s in summary if s["cell"][0] == probe and s["cell"][1] != "plane" and not math.isnan(s["share"])]
         if not rows:
             if any(c[0] == probe and c[1] != "plane" for c in cfg["cells"]):
-                out.append(f"**{words}**: no job of this actuation has finished yet; the ladder's jobs wait "
-                           "([docs/ladder.md](docs/ladder.md)).")
+                out.append(f"**{words}**: no job of this actuation has finished yet; the ladder's jobs wait{link}.")
             continue
 
         def best_per_cell(privileged):
@@ -503,7 +505,7 @@ def answer_sentences(cfg, summary) -> list[str]:
             text += f"; with the witness guiding their training (PRIVILEGED), {guided}"
         if probe != "Both":
             text += f"; every success had an impact ({impacts} of {len(rows)} rows checked)"
-        out.append(text + " ([docs/ladder.md](docs/ladder.md)).")
+        out.append(f"{text}{link}.")
     return out
 
 
@@ -702,7 +704,7 @@ def write_report(cfg, jobs, runs, out: Path, argv, seconds: float, quick: bool) 
               "policy evaluated sees only the env's observation; the others see only what the env gives any agent",
               ""]
     lines += ["## The answer", "", "Do baseline agents learn to use impacts? Per actuation (the README's block):", "",
-              *answer_sentences(cfg, summary), ""]
+              *answer_sentences(cfg, summary, link=""), ""]
     lines += ["## Goals", "", *goals(cfg, summary), ""]
     lines += ["## Per cell", "",
               "Success at the agent's budget (the policy it hands out: with early stopping, its best-validated "

@@ -126,3 +126,19 @@ def test_the_site_builds_in_strict_mode(tmp_path):
                          cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
     assert (tmp_path / "site" / "api" / "simulator" / "index.html").is_file()
+
+
+def test_every_link_of_docs_opens_a_file():
+    """Each relative link of a docs/ page names a file that exists, read from the page's folder (as on GitHub
+    and in the site): a report that copies the README's links (`docs/x.md`) into docs/ breaks the strict
+    build, and this says which page without mkdocs installed."""
+    link = re.compile(r"\[[^\]\n]+\]\(([^)\s]+)\)")
+    broken = []
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        for target in link.findall(page.read_text()):
+            path = target.split("#")[0]
+            if "://" in target or target.startswith("mailto:") or not path:
+                continue
+            if not (page.parent / path).exists():
+                broken.append(f"{page.relative_to(ROOT)}: {target}")
+    assert not broken, broken
