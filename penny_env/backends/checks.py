@@ -93,3 +93,53 @@ def check_compiled_formulas(table) -> None:
     if compiled is None:
         return
     once(_CHECKED_TABLES, table, lambda t: check_formulas_on_grid(t, compiled[0], compiled[1], " (compiled by numba)"))
+
+
+_CHECKED_AS_RUN = weakref.WeakKeyDictionary()  # table -> {what it was checked on: see check_table_as_run}
+
+
+def check_table_as_run(table, target: str, kind: int, law: int = -1) -> None:
+    """A user table's formulas as the ``target`` step runs them, against its own h, grad (and hessian) on the
+    comparison grid (registered.check_formulas_on_grid); ValueError naming the table and the first point where they
+    differ. On the CPU, the build's compiled copies (numba freezes the module globals they read when it compiles
+    them); with the plain-Python step and on CUDA (compiled from them), the formulas as they are now. A table
+    whose module constants were edited after register_table, or after its first check, ran the edited formulas
+    with no new check (the sibling of recheck_law); once per table and what it runs. Nothing for penny_env's own
+    shapes and the plane."""
+    from ..physics.tables import COMPILED_FORMULAS, compiled_kind
+    if table is None or type(table).__module__.startswith("penny_env.") or compiled_kind(type(table)) < 0:
+        return
+    terms, hess, _ = COMPILED_FORMULAS[compiled_kind(type(table))]
+    how = ""
+    if target == "cpu":
+        from .physics import physics_build
+        b = physics_build(target, kind, law=law)
+        terms, hess = b.namespace["table_terms"], b.namespace["table_hess"]
+        key = (id(terms), id(hess))  # (the build keeps them for the process: ids are not reused)
+        how = " (as this build compiled it: register the table again after editing its module)"
+    else:
+        key = (target, _globals_read(terms), _globals_read(hess))
+        how = " (as it is now: its module's globals may have changed since register_table)"
+    try:
+        done = _CHECKED_AS_RUN.setdefault(table, set())
+    except TypeError:  # (an unhashable table: checked every time)
+        done = set()
+    if key in done:
+        return
+    check_formulas_on_grid(table, terms, hess, how)
+    done.add(key)
+
+
+def _globals_read(f) -> tuple:
+    """The module globals ``f``'s code reads, as (name, repr(value)) pairs (functions by identity): what changes
+    when a module constant is edited."""
+    g = getattr(f, "__globals__", {})
+    names = set()
+    todo = [getattr(f, "__code__", None)]
+    while todo:
+        code = todo.pop()
+        if code is None:
+            continue
+        names.update(code.co_names)
+        todo.extend(c for c in code.co_consts if hasattr(c, "co_names"))
+    return tuple((n, repr(g[n]) if not callable(g[n]) else id(g[n])) for n in sorted(names) if n in g)

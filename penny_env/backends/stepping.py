@@ -60,7 +60,10 @@ def entry_points(core, target=None, **options):
     if target is None:
         target = "cpu" if core.backend == "numba" else "python"
     m = _model(core)
-    return env_entry_points(target, m.kind, core.task_record, type(core.k), law=m.law, **options)
+    fns = env_entry_points(target, m.kind, core.task_record, type(core.k), law=m.law, **options)
+    from .checks import check_table_as_run
+    check_table_as_run(core.table, target, m.kind, m.law)  # (what the step runs, not only what was registered)
+    return fns
 
 
 def draw_episodes(core, keys, episodes):

@@ -259,3 +259,48 @@ def test_the_environments_sample_their_impacts():
         registered.check_impacts = orig
     n = 2 * AUDIT_FIRST + 10 * AUDIT_EVERY
     assert [int(v) for v in seen if v < n] == [i for i in range(n) if i < AUDIT_FIRST or i % AUDIT_EVERY == 0]
+
+
+EDITABLE_TABLE = '''
+SCALE = 1.0
+
+
+def disc_terms(c, x, y):
+    r2, inv = c[0], c[1]
+    return (x * x + y * y - r2) * 0.5 * inv, x * inv, SCALE * y * inv
+'''
+
+
+def _editable_disc():
+    module = {"__name__": "users_tables"}
+    exec(compile(EDITABLE_TABLE, "users_tables.py", "exec"), module)  # noqa: S102 (the test's own source)
+    return module, variant("EditableDisc", terms=staticmethod(module["disc_terms"]))
+
+
+def test_a_table_edited_after_registration_is_checked_again_on_the_plain_python_step(shapes):
+    # accepted and run as registered; its module constant then edited: the plain-Python step ran the edited,
+    # wrong formula (dh/dy 10 % off) with no new check
+    module, cls = _editable_disc()
+    shapes("editable_disc", cls)
+    table = T.make_table({"kind": "editable_disc", "r": 0.1})
+    start = np.array([[0, 0, 0, 1.0, 20.0, 0.5]])
+    pb.simulate(start, table=table, t_final=0.5, backend="python")
+    module["SCALE"] = 1.1
+    with pytest.raises(ValueError, match=r"table disc \(EditableDisc\): the compiled formula terms \(as it is now: .*"
+                                         r"register_table\) gives dh/dy"):
+        pb.simulate(start, table=table, t_final=0.5, backend="python")
+
+
+def test_a_table_edited_before_its_first_build_is_checked_on_what_the_build_compiled(shapes):
+    # registered (its formulas compiled and compared then), edited before the first compiled build: the build
+    # compiled the edited formula, and only the registration's copy had been compared
+    pytest.importorskip("numba")
+    module, cls = _editable_disc()
+    shapes("editable_disc_cpu", cls)
+    table = T.make_table({"kind": "editable_disc_cpu", "r": 0.1})
+    start = np.array([[0, 0, 0, 1.0, 20.0, 0.5]])
+    pb.simulate(start, table=table, t_final=0.5, backend="python")  # (the table checked as it was)
+    module["SCALE"] = 1.1
+    with pytest.raises(ValueError, match=r"the compiled formula terms \(as this build compiled it: register the table "
+                                         r"again after editing its module\) gives dh/dy"):
+        pb.simulate(start, table=table, t_final=0.5, backend="numba")
