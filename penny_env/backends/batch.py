@@ -36,9 +36,10 @@ class CompiledBatch:
         if target != "python" and not compiles(table):
             raise ValueError(f"table: only registered tables with compiled formulas compile, got {type(table).__name__}")
         self.model = scalar_model(params, table, law, settings)
-        self._fns = physics_build(target, self.model.kind, law=self.model.law if target != "python" else -1).functions
+        build = physics_build(target, self.model.kind, law=self.model.law if target != "python" else -1)
         from .checks import check_table_as_run
-        check_table_as_run(table, target, self.model.kind, self.model.law)  # (what the loops run: checks.py)
+        check_table_as_run(table, build)  # (the formulas as the loops run them)
+        self._fns = build.functions
         self.law = law
         self.R = params.R
         self.plane = table is None

@@ -98,27 +98,26 @@ def check_compiled_formulas(table) -> None:
 _CHECKED_AS_RUN = weakref.WeakKeyDictionary()  # table -> {what it was checked on: see check_table_as_run}
 
 
-def check_table_as_run(table, target: str, kind: int, law: int = -1) -> None:
-    """A user table's formulas as the ``target`` step runs them, against its own h, grad (and hessian) on the
-    comparison grid (registered.check_formulas_on_grid); ValueError naming the table and the first point where they
-    differ. On the CPU, the build's compiled copies (numba freezes the module globals they read when it compiles
-    them); with the plain-Python step and on CUDA (compiled from them), the formulas as they are now. A table
-    whose module constants were edited after register_table, or after its first check, ran the edited formulas
-    with no new check (the sibling of recheck_law); once per table and what it runs. Nothing for penny_env's own
-    shapes and the plane."""
+def check_table_as_run(table, build) -> None:
+    """A user table's formulas as ``build`` (physics.physics_build's Builder) runs them, against its own h, grad (and
+    hessian) on the comparison grid (registered.check_formulas_on_grid); ValueError naming the table and the first
+    point where they differ. On the CPU, the build's compiled copies (numba freezes the module globals they read
+    when it compiles them); with the plain-Python step and on CUDA (compiled from them), the formulas as they are
+    now. A table whose module constants were edited after register_table, or after its first check, ran the edited
+    formulas with no new check (the sibling of recheck_law); once per table and what it runs. Nothing for
+    penny_env's own shapes and the plane.
+    """
     from ..physics.tables import COMPILED_FORMULAS, compiled_kind
     if table is None or type(table).__module__.startswith("penny_env.") or compiled_kind(type(table)) < 0:
         return
     terms, hess, _ = COMPILED_FORMULAS[compiled_kind(type(table))]
     how = ""
-    if target == "cpu":
-        from .physics import physics_build
-        b = physics_build(target, kind, law=law)
-        terms, hess = b.namespace["table_terms"], b.namespace["table_hess"]
+    if build.target == "cpu":
+        terms, hess = build.namespace["table_terms"], build.namespace["table_hess"]
         key = (id(terms), id(hess))  # (the build keeps them for the process: ids are not reused)
         how = " (as this build compiled it: register the table again after editing its module)"
     else:
-        key = (target, _globals_read(terms), _globals_read(hess))
+        key = (build.target, _globals_read(terms), _globals_read(hess))
         how = " (as it is now: its module's globals may have changed since register_table)"
     try:
         done = _CHECKED_AS_RUN.setdefault(table, set())

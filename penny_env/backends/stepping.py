@@ -62,7 +62,8 @@ def entry_points(core, target=None, **options):
     m = _model(core)
     fns = env_entry_points(target, m.kind, core.task_record, type(core.k), law=m.law, **options)
     from .checks import check_table_as_run
-    check_table_as_run(core.table, target, m.kind, m.law)  # (what the step runs, not only what was registered)
+    from .physics import physics_build
+    check_table_as_run(core.table, physics_build(target, m.kind, law=m.law))  # (the build the step extends)
     return fns
 
 
