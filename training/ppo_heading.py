@@ -97,6 +97,8 @@ class Args:
     std_init: float = 0.5  # initial action noise (heading: rad; speed: units of V_MAX)
     std_min: float = 0.15  # noise floor and ceiling (the log-std is clamped)
     std_max: float = 2.0
+    explore_until: float = 0.0  # > 0: the noise floor stays at std_init until training success appears, and lowers
+    #                             to std_min as it rises to this (never rising again); 0: the floor is std_min
     norm_coef: float = 0.1  # pulls the heading 2-vector's length to 1 (its angle's gradient stays bounded)
     heading_init: float = 0.01  # the heading 2-vector's output weights' scale at the start
     shaping: bool = True  # the potential-based shaping (agent_side.potential); off: the fair reward alone
@@ -120,7 +122,8 @@ CHECKS = {"num_envs": positive, "num_steps": positive, "minibatch_size": positiv
           "lr_min": positive, "lr_max": positive, "gamma": unit_interval, "gae_lambda": unit_interval,
           "clip_coef": positive, "target_kl": non_negative, "vf_coef": non_negative, "ent_coef": non_negative,
           "max_grad_norm": positive, "reward_scale": positive, "hidden": positive, "std_init": positive,
-          "std_min": positive, "std_max": positive, "norm_coef": non_negative, "heading_init": positive,
+          "std_min": positive, "std_max": positive, "explore_until": unit_interval, "norm_coef": non_negative,
+          "heading_init": positive,
           "v_flat": non_negative,
           "val_every": non_negative, "val_episodes": positive, "save_every": positive,
           "guide": one_of("none", "jsrl", "curriculum"), "guide_step": unit_interval,
@@ -227,7 +230,7 @@ def explained_variance(pred: torch.Tensor, target: torch.Tensor) -> float:
 
 PROGRESS = ["global_step", "wall_s", "train_success", "val_success", "steps_per_s", "std", "approx_kl", "clip_frac",
             "value_loss", "explained_variance", "grad_norm", "lr", "minibatches", "guide_frac", "guide_done",
-            "guide_success"]
+            "guide_success", "std_floor"]
 
 
 def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None) -> dict:
@@ -255,7 +258,8 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
                       args.guide_min_episodes, args.guide_p_own)
     iterations = max(1, -(-int(args.total_timesteps) // (N * T)))
     best = {"val": -1.0, "agent": None}  # keep_best: the best-validated snapshot so far
-    state = {"it": 0, "global_step": 0, "curve": [], "wall": 0.0}
+    state = {"it": 0, "global_step": 0, "curve": [], "wall": 0.0,
+             "floor": max(args.std_init, args.std_min) if args.explore_until > 0 else args.std_min}
     if resume is not None:
         saved = torch.load(resume, weights_only=False)
         agent.load_state_dict(saved["agent"])
@@ -337,6 +341,8 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
         for it in range(state["it"] + 1, iterations + 1):
             if args.lr_schedule == "anneal":
                 opt.param_groups[0]["lr"] = args.learning_rate * (1.0 - (it - 1) / iterations)
+            state["floor"] = noise_floor(args, state["floor"], train_success)
+            agent.log_std_range = (math.log(min(state["floor"], args.std_max)), math.log(args.std_max))
             succ = ends = 0
             with torch.no_grad():
                 for t in range(T):
@@ -390,7 +396,7 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
                     last = (delta + args.gamma * args.gae_lambda * (1 - DONE[t]) * last) * VALID[t]
                     adv[t] = last
                 ret = adv + V
-            stats = update(agent, opt, args, X, ACT, LP, adv, ret, V, VALID)
+            stats = {**update(agent, opt, args, X, ACT, LP, adv, ret, V, VALID), "std_floor": state["floor"]}
             t_upd += time.perf_counter() - tu
             state["it"], state["global_step"] = it, it * N * T
             global_step = state["global_step"]
@@ -459,6 +465,19 @@ def train(args: Args, checkpoints=(), on_checkpoint=None, log=print, resume=None
     results["policy"] = policy()
     results["final_policy"] = HeadingPolicy(agent, k)  # (the last update's, without early stopping)
     return results
+
+
+def noise_floor(args: Args, floor: float, train_success: float) -> float:
+    """The noise floor for the next update (``explore_until`` > 0): std_init while the training success is 0,
+    std_min once it reaches explore_until, linear between, and never above the floor before (a success that falls
+    later does not widen the noise again). Why: with the floor at std_min from the start, the noise reached it
+    (about 2e7 env steps) before some seeds had parked once, and those seeds then took 5e7-6e7 env steps to find
+    their first parks (docs/ladder.md, the seeds' curves); the seeds that parked while the noise was wide learned."""
+    if args.explore_until <= 0 or math.isnan(train_success):
+        return floor
+    top = max(args.std_init, args.std_min)
+    share = min(max(1.0 - train_success / args.explore_until, 0.0), 1.0)
+    return min(floor, args.std_min + (top - args.std_min) * share)
 
 
 def update(agent: Agent, opt, args: Args, X, ACT, LP, adv, ret, V, VALID) -> dict:

@@ -152,3 +152,27 @@ def test_the_fair_reward_and_the_args_check_take_a_cell_that_replaces_the_scene(
         args = ppo_torch.ladder_args(env_id=env_id, env_kwargs=overrides, total_timesteps=256, num_envs=16,
                                      num_steps=16, minibatch_size=64)
         ppo_torch.check_args(args)
+
+
+def test_the_noise_floor_stays_wide_until_the_first_parks_and_never_widens_again():
+    args = ppo_heading.Args(explore_until=0.1, std_init=0.5, std_min=0.15)
+    floor = ppo_heading.noise_floor(args, 0.5, float("nan"))  # (no episode has ended yet)
+    assert floor == 0.5
+    assert ppo_heading.noise_floor(args, floor, 0.0) == 0.5
+    half = ppo_heading.noise_floor(args, floor, 0.05)
+    assert half == pytest.approx(0.325)
+    assert ppo_heading.noise_floor(args, half, 0.0) == half  # (a success that falls does not widen it)
+    assert ppo_heading.noise_floor(args, half, 0.4) == 0.15
+    off = ppo_heading.Args()  # explore_until 0: the floor is std_min throughout
+    assert ppo_heading.noise_floor(off, off.std_min, 0.0) == off.std_min
+
+
+def test_a_run_with_the_wide_floor_logs_it_and_keeps_its_noise_above_it(tmp_path):
+    args = _args("ppo_heading", STADIUM, tmp_path, explore_until=0.1)
+    _train("ppo_heading", args, log=None)
+    rows = (tmp_path / "ppo_heading" / "progress.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    floor, std = head.index("std_floor"), head.index("std")
+    for row in rows[1:]:  # (no park in 3 tiny updates: the floor stays at std_init, and the noise at or above it)
+        cells = row.split(",")
+        assert float(cells[floor]) == 0.5 and float(cells[std]) >= 0.5 * (1 - 1e-6)
