@@ -604,9 +604,10 @@ def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
         if len(runs_of) < 2:
             continue
         lines += [f"### {cell_name(cell)}: {', '.join(runs_of)}", "",
-                  "| recipe | seed | validation peak (env steps) | after the peak: lowest, final | drop after the peak | "
-                  "learning rate at the peak, end | noise std at the peak, end | gradient norm at the peak, end |",
-                  "|---|---:|---|---|---:|---|---|---|"]
+                  "| recipe | seed | first parks (env steps; noise std then) | validation peak (env steps) | after the "
+                  "peak: lowest, final | drop after the peak | learning rate at the peak, end | noise std at the peak, "
+                  "end | gradient norm at the peak, end |",
+                  "|---|---:|---|---|---|---:|---|---|---|"]
         for agent, seeds in runs_of.items():
             for seed, p in seeds:
                 v = p["val_success"]
@@ -619,7 +620,8 @@ def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
 
                 def at(col, j):
                     return p[col][j] if col in p else math.nan
-                lines.append(f"| {agent} | {seed} | {v[i]:.2f} ({p['global_step'][i]:.3g}) | {low:.2f}, {last:.2f} "
+                lines.append(f"| {agent} | {seed} | {first_parks(p)} | {v[i]:.2f} ({p['global_step'][i]:.3g}) | "
+                             f"{low:.2f}, {last:.2f} "
                              f"| {v[i] - low:+.2f} | {at('lr', i):.1e}, {at('lr', -1):.1e} | {at('std', i):.3f}, "
                              f"{at('std', -1):.3f} | {at('grad_norm', i):.2f}, {at('grad_norm', -1):.2f} |")
         png = write_fall_figure(cell, runs_of, out)
@@ -627,6 +629,23 @@ def fall_section(cfg, jobs, runs, results, out: Path) -> list[str]:
             lines += ["", f"![the diagnostics of {cell_name(cell)}]({png})"]
         lines.append("")
     return lines
+
+
+FIRST_PARKS = 0.01  # validation success that counts as parking
+
+
+def first_parks(p) -> str:
+    """From which validation a run's validation success stayed at or above FIRST_PARKS to its end (an early lucky
+    park is not the start of learning; the training success restarts its window at a resume), and its noise std
+    then ("-": never)."""
+    v = p.get("val_success", np.array([]))
+    rows = np.flatnonzero(np.isfinite(v))
+    below = rows[v[rows] < FIRST_PARKS]
+    later = rows[rows > below[-1]] if len(below) else rows
+    if not len(later):
+        return "-"
+    j = later[0]
+    return f"{p['global_step'][j]:.3g} ({p['std'][j]:.3f})" if "std" in p else f"{p['global_step'][j]:.3g}"
 
 
 def write_fall_figure(cell, runs_of, out: Path) -> str | None:
