@@ -121,7 +121,7 @@ def test_the_fall_section_puts_the_recipes_diagnostics_side_by_side(tmp_path):
     cfg = {"eval_seeds": 4, "cells": [cell], "fall": ["a", "b"],
            "agents": {"a": {"privileged": False}, "b": {"privileged": False}}}
     jobs, results = [], {}
-    for agent, vals in (("a", [0.1, 0.5, 0.2]), ("b", [0.1, 0.5, 0.6])):
+    for agent, vals in (("a", [0.1, 0.5, 0.2]), ("b", [0.0, 0.5, 0.6])):
         job = {"agent": agent, "cell": list(cell), "seed": 0}
         jobs.append(job)
         folder = ladder.job_dir(tmp_path, job)
@@ -134,8 +134,9 @@ def test_the_fall_section_puts_the_recipes_diagnostics_side_by_side(tmp_path):
         results[(agent, cell)] = [{"job": job}]
     lines = ladder.fall_section(cfg, jobs, tmp_path, results, tmp_path / "r.md")
     text = "\n".join(lines)
-    assert "| a | 0 | 0.50 (2e+03) | 0.20, 0.20 | +0.30 |" in text  # the peak, then the fall after it
-    assert "| b | 0 | 0.60 (3e+03) | 0.60, 0.60 | +0.00 |" in text
+    # the first parks (from which validation success stays at or above 0.01), the peak, then the fall after it
+    assert "| a | 0 | 1e+03 (0.200) | 0.50 (2e+03) | 0.20, 0.20 | +0.30 |" in text
+    assert "| b | 0 | 2e+03 (0.200) | 0.60 (3e+03) | 0.60, 0.60 | +0.00 |" in text
 
 
 def test_the_fall_section_shows_the_kept_runs_with_their_commit(tmp_path, monkeypatch):
