@@ -51,7 +51,11 @@ def register_task(record) -> None:
     refused), then trial calls of its stages on the default scene (envs/task_trials.py: what each returns, and
     where its observation writes). TypeError / ValueError naming the task and the stage otherwise. Registering
     a name again replaces the task for everything built afterwards, with a UserWarning."""
-    from .envs.task_trials import trial_task
+    from functools import partial
+
+    from .envs.task_trials import retry_if_edited, trial_task
+    from .step.tasks.base import RETRIALS
     check_task(record)
     trial_task(record)
     add_task(record)
+    RETRIALS[id(record)] = (record, partial(retry_if_edited, record))  # (an edit after this: tried again before use)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import weakref
 
+from ..physics.edits import globals_read
 from ..physics.law_checks import ARGUMENTS, try_law
 from .interrupts import load_numba
 from ..physics.tables.base import N_CONSTANTS
@@ -117,7 +118,7 @@ def check_table_as_run(table, build) -> None:
         key = (id(terms), id(hess))  # (the build keeps them for the process: ids are not reused)
         how = " (as this build compiled it: register the table again after editing its module)"
     else:
-        key = (build.target, _globals_read(terms), _globals_read(hess))
+        key = (build.target, globals_read(terms), globals_read(hess))
         how = " (as it is now: its module's globals may have changed since register_table)"
     try:
         done = _CHECKED_AS_RUN.setdefault(table, set())
@@ -128,17 +129,3 @@ def check_table_as_run(table, build) -> None:
     check_formulas_on_grid(table, terms, hess, how)
     done.add(key)
 
-
-def _globals_read(f) -> tuple:
-    """The module globals ``f``'s code reads, as (name, repr(value)) pairs (functions by identity): what changes
-    when a module constant is edited."""
-    g = getattr(f, "__globals__", {})
-    names = set()
-    todo = [getattr(f, "__code__", None)]
-    while todo:
-        code = todo.pop()
-        if code is None:
-            continue
-        names.update(code.co_names)
-        todo.extend(c for c in code.co_consts if hasattr(c, "co_names"))
-    return tuple((n, repr(g[n]) if not callable(g[n]) else id(g[n])) for n in sorted(names) if n in g)

@@ -24,7 +24,7 @@ from ..step.config import ConfigError
 from ..step.draws import seed_keys  # noqa: F401  (re-exported: the envs turn seeds into keys with it)
 from .scene import Scene, Task
 from ..step.tasks import task_record
-from ..step.tasks.base import check_constants
+from ..step.tasks.base import check_constants, retry_before_use
 
 X, Y, THETA, PHI, THETA_DOT, PHI_DOT = range(6)
 INSIDE_TOL = check_inside.__defaults__[-1]  # check_inside's tolerance on the ends' h (x table.size)
@@ -76,6 +76,7 @@ class Core:
         self.L = scene.length_scale()
         self.inv_L = 1.0 / self.L
         self.task_record = task_record(task.kind) if record is None else record
+        retry_before_use(self.task_record)  # (a registered task whose module was edited since: tried again)
         if self.task_record.needs_walls and self.table is None:
             raise ConfigError(f"task.kind {task.kind!r} needs a table with walls; scene.table is the open plane")
         try:

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ..physics.edits import globals_read
 from ..physics.kernels import SCALAR
 from ..physics.numbers import is_real
 from ..physics.scalar import scalar_model
@@ -66,9 +67,38 @@ def _finite(record, stage, v, what) -> float:
     return float(v)
 
 
+_TRIED: dict = {}  # id(record) -> (record, stage_globals(record) when its trials last passed)
+
+
+def stage_globals(record) -> tuple:
+    """The module globals the task's stages read (physics/edits.py): what an edit of a module constant changes."""
+    return tuple(globals_read(f) for f in (record.constants, record.reward, record.target, record.observation,
+                                           record.marked_arc) if f is not None)
+
+
+def retry_if_edited(record) -> None:
+    """The trials again where a registered task's stages read other module globals than when its trials passed (a
+    module constant edited after register_task: the step would run it untried; an observation that now writes
+    into the penny's entries, say); ValueError / TypeError as register_task's, saying why. Nothing for a record
+    that was never tried (penny_env's own tasks, a record handed to a Core directly)."""
+    entry = _TRIED.get(id(record))
+    if entry is None or entry[0] is not record:
+        return
+    now = stage_globals(record)
+    if now == entry[1]:
+        return
+    _TRIED[id(record)] = (record, now)  # (the trials' own Core sees the fingerprint it is trying)
+    try:
+        trial_task(record)
+    except (TypeError, ValueError) as exc:
+        del _TRIED[id(record)]
+        raise type(exc)(f"{exc} (tried again: a module global that task {record.name!r}'s stages read changed "
+                        "since register_task; register it again after an edit)") from None
+
+
 def trial_task(record) -> None:
     """The trials of the module docstring on the default scene (the paper's ellipse); ValueError / TypeError
-    naming the task and the stage."""
+    naming the task and the stage. Passed, the globals its stages read are kept (:func:`retry_if_edited`)."""
     from .core import Core
     from .scene import Scene
     scene = Scene()
@@ -130,3 +160,4 @@ def trial_task(record) -> None:
         if record.marked_arc is not None:
             _numbers(record, "marked_arc", _call(record, "marked_arc", record.marked_arc, k, after), 3,
                      "cos b, sin b, cos half-width")
+    _TRIED[id(record)] = (record, stage_globals(record))

@@ -313,3 +313,33 @@ def test_the_task_output_warning_names_the_cause_found_at_the_step_that_ended_th
                 assert (not caught) == (step < steps) and trunc.all() == (step == steps), (kind, step)
         assert len(caught) == 1 and re.search(cause, str(caught[0].message)), str(caught[0].message)
         assert "drew a target" not in str(caught[0].message)  # (the cause found, not every possible one)
+
+
+EDITABLE_TASK = '''
+COLUMN = 10
+
+
+def clock(k, st, obs, i):
+    obs[i, COLUMN] = 0.5
+'''
+
+
+def test_a_task_edited_after_registration_is_tried_again_before_an_env_uses_it():
+    # registered (its observation writes its own entry), its module constant then edited so that the observation
+    # writes into the penny's entries: the step ran it untried (the run-time guard checks only the task's entries)
+    module = {"__name__": "users_tasks"}
+    exec(compile(EDITABLE_TASK, "users_tasks.py", "exec"), module)  # noqa: S102 (the test's own source)
+    record = TaskRecord("edited_clock", reach.ReachTask, reach.constants, reach.reward, reach.target, module["clock"],
+                        ((0.0, 1.0),))
+    register_task(record)
+    try:
+        PennyEnv("ellipse", {"kind": "edited_clock"}, backend="python").reset(seed=0)
+        module["COLUMN"] = 3
+        with pytest.raises(ValueError, match=r"register_task\('edited_clock'\): observation wrote obs\[\+0 rows, 3\].*"
+                                             r"\(tried again: a module global that task 'edited_clock'\'s stages read "
+                                             r"changed since register_task; register it again after an edit\)"):
+            PennyEnv("ellipse", {"kind": "edited_clock"}, backend="python")
+        module["COLUMN"] = 10  # (put back: the trials pass again, and the env builds)
+        PennyEnv("ellipse", {"kind": "edited_clock"}, backend="python").reset(seed=0)
+    finally:
+        TASKS.pop("edited_clock", None)

@@ -163,6 +163,18 @@ def add_task(record: TaskRecord) -> None:
                       "environments built before keep the task they were built with", UserWarning, stacklevel=3)
 
 
+RETRIALS: dict = {}  # id(record) -> (record, retry): what penny_env.register_task asks a Core to run before use
+
+
+def retry_before_use(record) -> None:
+    """The re-trial that penny_env.register_task left for ``record`` (envs/task_trials.retry_if_edited: its trials
+    again where a module constant its stages read was edited since), run by every Core before it uses the record;
+    nothing for a record registered otherwise."""
+    entry = RETRIALS.get(id(record))
+    if entry is not None and entry[0] is record:
+        entry[1]()
+
+
 def task_record(kind) -> TaskRecord:
     """The registered record of task kind ``kind`` (ConfigError naming the registered kinds otherwise)."""
     if not isinstance(kind, str):
