@@ -519,8 +519,9 @@ FALL_TEXT = ("Recipes of PPO with the heading head on the same cells and seeds (
              "recipe: the learning rate annealed linearly to 0 over the budget, the heading noise free to shrink to "
              "0.05 rad, an update stopped at a KL of 0.02; ppo_heading_floor: the first recipe with the noise kept "
              "above 0.15 rad; ppo_heading, the ladder's: the learning rate adapted to the measured KL (RSL-RL's rule, "
-             "desired KL 0.01), the noise above 0.15 rad, LayerNorm, Adam with beta1 = beta2. Per seed: the "
-             "validation peak, the lowest and the final validation after it, and the learning rate, noise std and "
+             "desired KL 0.01), the noise above 0.15 rad, LayerNorm, Adam with beta1 = beta2; ppo_heading_explore: the "
+             "ladder's recipe with the noise floor held at 0.5 rad until the first parks. Per seed: the first parks, "
+             "the validation peak, the lowest and the final validation after it, and the learning rate, noise std and "
              "gradient norm at the peak and at the end. Rows marked 'kept run' are single runs kept in docs/ladder_fall/ "
              "(runs.csv: their commit, date and command), shown beside the ladder's own jobs of the same "
              "recipes.")
@@ -543,7 +544,15 @@ FALL_READING = (
     "end of its run. The noise floor alone (ppo_heading_floor) and more seeds of each recipe are the config's jobs "
     "that separate the parts of the cure; until they have run this reading rests on one seed of the first recipe. "
     "The ladder's recipe removes the fall, not the spread between seeds: a seed that starts late is still low at "
-    "its budget (the per-seed rates above).")
+    "its budget (the per-seed rates above).\n\n"
+    "**Why the seeds differ at the budget, and what closes the spread** (the column 'first parks'). The spread is "
+    "not a fall: it is when a seed first parks. The ladder's recipe lets its noise shrink to the floor of 0.15 rad "
+    "within its first few tens of millions of env steps; the seeds that parked while the noise was still wide "
+    "learned to 0.9 and above, and the seeds that had not parked by then found their first parks only much later, "
+    "at the floor, and were still low at the budget. ppo_heading_explore holds the noise floor at the starting "
+    "0.5 rad until the training success is above 0 and lowers it to 0.15 rad as the success rises to 0.1 "
+    "(training/ppo_heading.py, noise_floor; it never widens again): compare its seeds' first parks and final "
+    "rates with the ladder recipe's on the same seeds.")
 
 
 def progress_of(runs, job) -> dict | None:
