@@ -112,10 +112,9 @@ def check_table_as_run(table, build) -> None:
     if table is None or type(table).__module__.startswith("penny_env.") or compiled_kind(type(table)) < 0:
         return
     terms, hess, _ = COMPILED_FORMULAS[compiled_kind(type(table))]
-    how = ""
     if build.target == "cpu":
         terms, hess = build.namespace["table_terms"], build.namespace["table_hess"]
-        key = (id(terms), id(hess))  # (the build keeps them for the process: ids are not reused)
+        key = (terms, hess)  # (the compiled copies themselves: a fresh build's new copies are checked anew)
         how = " (as this build compiled it: register the table again after editing its module)"
     else:
         key = (build.target, globals_read(terms), globals_read(hess))
